@@ -1,0 +1,11 @@
+"""Classical baselines: centralized LQR, autonomous, decentralized static gains.
+
+Public names::
+
+    from baselines import lqr, autonomous, decentralized, polish_gain
+"""
+
+from .lqr import autonomous, decentralized, lqr
+from .polish import PolishResult, polish_gain
+
+__all__ = ["lqr", "autonomous", "decentralized", "polish_gain", "PolishResult"]

@@ -1,0 +1,48 @@
+"""Problem instances, evaluation, and the GRNN co-design.
+
+Public names::
+
+    from codesign import paper_instance, Instance, Design
+    from codesign import static_gain_cost, simulate, validation_set
+"""
+
+from .controllers import StaticGain, ZeroInput, controller_from_arrays, register_controller
+from .design import INFO_MODELS, STATUSES, Design, count_links
+from .evaluation import (
+    Rollout,
+    compare_exact_and_simulated,
+    exact_cost,
+    response_cost,
+    simulate,
+    spectral_radius,
+    static_gain_cost,
+    static_gain_cost_and_grad,
+    validation_set,
+)
+from .instances import Instance, InstanceError, hop_distances, paper_instance
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Instance",
+    "InstanceError",
+    "paper_instance",
+    "hop_distances",
+    "Design",
+    "STATUSES",
+    "INFO_MODELS",
+    "count_links",
+    "StaticGain",
+    "ZeroInput",
+    "controller_from_arrays",
+    "register_controller",
+    "static_gain_cost",
+    "static_gain_cost_and_grad",
+    "response_cost",
+    "validation_set",
+    "simulate",
+    "Rollout",
+    "exact_cost",
+    "compare_exact_and_simulated",
+    "spectral_radius",
+]

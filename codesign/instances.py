@@ -1,0 +1,324 @@
+"""Problem instances: the paper's random family and users' own systems.
+
+An :class:`Instance` is everything a method needs to design a controller and
+everything the evaluator needs to score it: the dynamics ``x(t+1) = A x(t) + B u(t)``,
+the stage costs ``Q`` and ``R``, the terminal cost ``P`` (the DARE solution, so that
+centralized LQR scores exactly 1), the horizon, the given communication graph and
+the plant graph.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import networkx as nx
+import numpy as np
+import scipy.linalg
+
+__all__ = ["Instance", "InstanceError", "paper_instance", "hop_distances"]
+
+
+class InstanceError(ValueError):
+    """Raised for malformed problem data (shapes, NaN, costs, stabilizability)."""
+
+
+def _frozen(array: np.ndarray) -> np.ndarray:
+    array = np.array(array, dtype=float, copy=True)
+    array.setflags(write=False)
+    return array
+
+
+def hop_distances(adj: np.ndarray) -> np.ndarray:
+    """All-pairs hop distance of the directed graph ``adj[i, j] != 0`` (i -> j).
+
+    Unreachable pairs get ``np.inf``; the diagonal is 0.
+    """
+    adj = np.asarray(adj) != 0
+    graph = nx.from_numpy_array(adj.astype(int), create_using=nx.DiGraph)
+    graph.remove_edges_from(nx.selfloop_edges(graph))
+    n = adj.shape[0]
+    dist = np.full((n, n), np.inf)
+    for source, lengths in nx.all_pairs_shortest_path_length(graph):
+        for target, d in lengths.items():
+            dist[source, target] = d
+    return dist
+
+
+@dataclass(frozen=True, eq=False)
+class Instance:
+    """One linear-quadratic distributed control problem.
+
+    Attributes
+    ----------
+    A, B : ndarray, shape (n, n)
+        Dynamics ``x(t+1) = A x(t) + B u(t)`` (one scalar state and input per node).
+    Q, R : ndarray, shape (n, n)
+        Stage cost ``x'Qx + u'Ru``.
+    P : ndarray, shape (n, n)
+        Terminal cost, the stabilizing DARE solution.
+    horizon : int
+        T; the cost sums stages 0..T-1 and adds ``x(T)' P x(T)``.
+    comm_adj : ndarray of {0, 1}, shape (n, n)
+        The given communication graph, self-loops included; ``comm_adj[i, j] = 1``
+        means node i may receive from node j.
+    plant_adj : ndarray of {0, 1}, shape (n, n)
+        Support of ``A`` or ``B``: who influences whom in one step.
+    spec : dict
+        Where the instance came from (family and arguments); JSON-serializable. It
+        keys stored results, so two instances with the same spec are the same.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+    P: np.ndarray
+    horizon: int
+    comm_adj: np.ndarray
+    plant_adj: np.ndarray
+    spec: dict[str, Any] = field(default_factory=dict)
+
+    # -- construction -----------------------------------------------------
+    @classmethod
+    def from_matrices(
+        cls,
+        A,
+        B,
+        *,
+        Q=None,
+        R=None,
+        comm_adj=None,
+        horizon: int = 50,
+        name: str | None = None,
+    ) -> "Instance":
+        """Build an instance from a user's own matrices, with validation.
+
+        Parameters
+        ----------
+        A, B : array_like, shape (n, n)
+            Dynamics. One scalar state and one scalar input per node.
+        Q, R : array_like, shape (n, n), optional
+            Stage costs, identity by default. ``Q`` must be symmetric positive
+            semidefinite and ``R`` symmetric positive definite.
+        comm_adj : array_like, shape (n, n), optional
+            Given communication graph (nonzero = link). Self-loops are added.
+            Defaults to the plant graph.
+        horizon : int
+            Finite horizon T >= 1.
+        name : str, optional
+            A label stored in :attr:`spec`.
+
+        Raises
+        ------
+        InstanceError
+            Naming the problem: shapes, non-finite entries, Q not PSD, R not PD,
+            (A, B) not stabilizable, bad horizon.
+        """
+        A = _as_matrix("A", A)
+        n = A.shape[0]
+        if A.shape != (n, n):
+            raise InstanceError(f"A must be square, got shape {A.shape}")
+        B = _as_matrix("B", B)
+        if B.shape != (n, n):
+            raise InstanceError(
+                f"B must have shape {(n, n)} to match A (one input per node), got {B.shape}"
+            )
+        Q = np.eye(n) if Q is None else _as_matrix("Q", Q)
+        R = np.eye(n) if R is None else _as_matrix("R", R)
+        for label, M in (("Q", Q), ("R", R)):
+            if M.shape != (n, n):
+                raise InstanceError(f"{label} must have shape {(n, n)}, got {M.shape}")
+            if not np.allclose(M, M.T, atol=1e-10 * max(1.0, np.abs(M).max())):
+                raise InstanceError(f"{label} must be symmetric")
+        q_min = np.linalg.eigvalsh(Q).min()
+        if q_min < -1e-10 * max(1.0, np.abs(Q).max()):
+            raise InstanceError(f"Q must be positive semidefinite (smallest eigenvalue {q_min:.3g})")
+        r_min = np.linalg.eigvalsh(R).min()
+        if r_min <= 1e-12 * max(1.0, np.abs(R).max()):
+            raise InstanceError(f"R must be positive definite (smallest eigenvalue {r_min:.3g})")
+        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
+            raise InstanceError(f"horizon must be a positive integer, got {horizon!r}")
+        plant_adj = ((A != 0) | (B != 0)).astype(float)
+        if comm_adj is None:
+            comm = plant_adj.copy()
+        else:
+            comm = _as_matrix("comm_adj", comm_adj)
+            if comm.shape != (n, n):
+                raise InstanceError(f"comm_adj must have shape {(n, n)}, got {comm.shape}")
+            comm = (comm != 0).astype(float)
+        np.fill_diagonal(comm, 1.0)
+        P = solve_dare(A, B, Q, R)
+        digest = hashlib.sha256()
+        for M in (A, B, Q, R, comm):
+            digest.update(np.ascontiguousarray(M, dtype=float).tobytes())
+        spec = {"family": "matrices", "n": n, "horizon": int(horizon), "sha256": digest.hexdigest()[:16]}
+        if name is not None:
+            spec["name"] = str(name)
+        return cls(A, B, Q, R, P, int(horizon), comm, plant_adj, spec)
+
+    def __post_init__(self):
+        for name in ("A", "B", "Q", "R", "P", "comm_adj", "plant_adj"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+        object.__setattr__(self, "spec", dict(self.spec))
+
+    # -- derived quantities -------------------------------------------------
+    @property
+    def n(self) -> int:
+        """Number of nodes (subsystems)."""
+        return self.A.shape[0]
+
+    @property
+    def seed(self) -> int:
+        """The generator seed, or 0 for user-supplied matrices."""
+        return int(self.spec.get("seed", 0))
+
+    @property
+    def trace_P(self) -> float:
+        """Normalizer: centralized LQR's expected cost with x(0) ~ N(0, I)."""
+        return float(np.trace(self.P))
+
+    @cached_property
+    def K_lqr(self) -> np.ndarray:
+        """Centralized LQR gain for ``u = K x`` (sign included)."""
+        BtP = self.B.T @ self.P
+        K = -np.linalg.solve(self.R + BtP @ self.B, BtP @ self.A)
+        K.setflags(write=False)
+        return K
+
+    @cached_property
+    def gso(self) -> np.ndarray:
+        """Given graph shift operator: ``comm_adj`` divided by its spectral norm."""
+        S = self.comm_adj / np.linalg.norm(self.comm_adj, 2)
+        S.setflags(write=False)
+        return S
+
+    @property
+    def open_loop_radius(self) -> float:
+        """Spectral radius of A."""
+        return float(np.max(np.abs(np.linalg.eigvals(self.A))))
+
+    @property
+    def key(self) -> str:
+        """Canonical JSON of :attr:`spec`, used to key stored results."""
+        return json.dumps(self.spec, sort_keys=True, separators=(",", ":"))
+
+    def __repr__(self) -> str:
+        spec = ", ".join(f"{k}={v!r}" for k, v in self.spec.items())
+        return f"Instance({spec})"
+
+
+def _as_matrix(label: str, value) -> np.ndarray:
+    try:
+        M = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise InstanceError(f"{label} must be a numeric matrix: {exc}") from None
+    if M.ndim != 2:
+        raise InstanceError(f"{label} must be a 2-D matrix, got {M.ndim} dimension(s)")
+    if not np.all(np.isfinite(M)):
+        raise InstanceError(f"{label} has non-finite entries (NaN or inf)")
+    return M
+
+
+def solve_dare(A, B, Q, R) -> np.ndarray:
+    """Stabilizing DARE solution, or :class:`InstanceError` if there is none."""
+    try:
+        P = scipy.linalg.solve_discrete_are(A, B, Q, R)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise InstanceError(
+            f"(A, B) is not stabilizable with these costs: the DARE has no stabilizing solution ({exc})"
+        ) from None
+    P = (P + P.T) / 2
+    K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+    radius = np.max(np.abs(np.linalg.eigvals(A - B @ K)))
+    if not np.all(np.isfinite(P)) or radius >= 1 - 1e-12:
+        raise InstanceError(
+            f"(A, B) is not stabilizable with these costs: the DARE solution does not stabilize "
+            f"(closed-loop spectral radius {radius:.6g})"
+        )
+    return P
+
+
+def _knn_graph(positions: np.ndarray, degree: int) -> np.ndarray:
+    n = positions.size
+    gaps = np.abs(positions[:, None] - positions[None, :])
+    # Stable sort so that a node is always among its own `degree` nearest (distance 0).
+    nearest = np.argsort(gaps, axis=1, kind="stable")[:, :degree]
+    adj = np.zeros((n, n))
+    rows = np.repeat(np.arange(n), degree)
+    adj[rows, nearest.ravel()] = 1.0
+    adj[nearest.ravel(), rows] = 1.0
+    return adj
+
+
+def paper_instance(
+    seed: int,
+    *,
+    n: int = 20,
+    degree: int = 6,
+    a_norm: float = 0.995,
+    b_norm: float = 1.0,
+    hops: int = 3,
+    horizon: int = 50,
+) -> Instance:
+    """One instance of the paper's random family (Yang & Matni 2021, Sec. IV).
+
+    Positions ``~ U[0, 1)``; each node links to its ``degree`` nearest positions
+    (itself included), made symmetric; redrawn until connected. ``A`` and ``B``
+    share the eigenvectors of the normalized adjacency with i.i.d. N(0, 1)
+    eigenvalues, are cut to ``hops`` hops and scaled to spectral norms ``a_norm``
+    and ``b_norm``. ``Q = R = I`` and ``P`` solves the DARE.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the only random stream used (positions, then eigenvalues of A, then of B).
+    n, degree, a_norm, b_norm, hops, horizon
+        Family parameters; the defaults are the paper's.
+    """
+    for label, value, low in (("n", n, 2), ("degree", degree, 2), ("hops", hops, 0), ("horizon", horizon, 1)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+            raise InstanceError(f"{label} must be an integer >= {low}, got {value!r}")
+    if degree > n:
+        raise InstanceError(f"degree ({degree}) cannot exceed n ({n})")
+    for label, value in (("a_norm", a_norm), ("b_norm", b_norm)):
+        if not (isinstance(value, (int, float, np.floating)) and np.isfinite(value) and value > 0):
+            raise InstanceError(f"{label} must be a positive finite number, got {value!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InstanceError(f"seed must be a non-negative integer, got {seed!r}")
+    rng = np.random.default_rng(int(seed))
+    while True:
+        comm = _knn_graph(rng.uniform(0.0, 1.0, n), degree)
+        if nx.is_connected(nx.from_numpy_array(comm)):
+            break
+    gso = comm / np.linalg.norm(comm, 2)
+    _, V = np.linalg.eigh(gso)
+    a = rng.standard_normal(n)
+    b = rng.standard_normal(n)
+    far = hop_distances(comm) > hops
+    A = (V * a) @ V.T
+    B = (V * b) @ V.T
+    A[far] = 0.0
+    B[far] = 0.0
+    A = (A + A.T) / 2  # exact symmetry; eigh round-off is O(1e-16)
+    B = (B + B.T) / 2
+    A *= a_norm / np.linalg.norm(A, 2)
+    B *= b_norm / np.linalg.norm(B, 2)
+    Q = np.eye(n)
+    R = np.eye(n)
+    P = solve_dare(A, B, Q, R)
+    plant = ((A != 0) | (B != 0)).astype(float)
+    spec = {
+        "family": "paper",
+        "seed": int(seed),
+        "n": int(n),
+        "degree": int(degree),
+        "a_norm": float(a_norm),
+        "b_norm": float(b_norm),
+        "hops": int(hops),
+        "horizon": int(horizon),
+    }
+    return Instance(A, B, Q, R, P, int(horizon), comm, plant, spec)

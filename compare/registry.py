@@ -1,0 +1,103 @@
+"""The method registry: every design method the harness can run, by name.
+
+A method is a function ``f(instance, *, **hyperparameters)`` returning a
+:class:`codesign.Design` or a list of them (a path, e.g. one per regularization
+weight). Adding a method is one module plus one :func:`register` line below.
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass
+from typing import Callable
+
+import baselines
+
+__all__ = ["Method", "register", "get_method", "methods", "UnknownMethodError"]
+
+
+class UnknownMethodError(KeyError):
+    def __str__(self):
+        return str(self.args[0])
+
+
+@dataclass(frozen=True)
+class Method:
+    """A registered method: its name, function, one-line summary and legend label."""
+
+    name: str
+    func: Callable
+    summary: str
+    label: str
+
+    @property
+    def hyperparameters(self) -> dict[str, inspect.Parameter]:
+        """Keyword-only hyperparameters and their defaults."""
+        sig = inspect.signature(self.func)
+        return {p.name: p for p in sig.parameters.values() if p.kind is inspect.Parameter.KEYWORD_ONLY}
+
+    def check_params(self, params: dict, where: str = "params") -> None:
+        """Raise ValueError naming the key for an unknown or mistyped hyperparameter."""
+        accepted = self.hyperparameters
+        for key, value in params.items():
+            if key not in accepted:
+                known = ", ".join(accepted) or "none"
+                raise ValueError(
+                    f"{where}.{key}: unknown hyperparameter for method {self.name!r} (accepts: {known})"
+                )
+            default = accepted[key].default
+            if default is inspect.Parameter.empty or default is None:
+                continue
+            if not _same_kind(default, value):
+                raise ValueError(
+                    f"{where}.{key}: expected {type(default).__name__} like the default {default!r}, "
+                    f"got {type(value).__name__} {value!r}"
+                )
+
+    def __call__(self, instance, **params):
+        result = self.func(instance, **params)
+        return list(result) if isinstance(result, (list, tuple)) else [result]
+
+
+def _same_kind(default, value) -> bool:
+    if isinstance(default, bool) or isinstance(value, bool):
+        return isinstance(default, bool) and isinstance(value, bool)
+    if isinstance(default, int):
+        return isinstance(value, int)
+    if isinstance(default, float):
+        return isinstance(value, (int, float))
+    if isinstance(default, str):
+        return isinstance(value, str)
+    if isinstance(default, (list, tuple)):
+        return isinstance(value, (list, tuple))
+    return True
+
+
+_REGISTRY: dict[str, Method] = {}
+
+
+def register(name: str, func: Callable, *, label: str | None = None, summary: str | None = None) -> Method:
+    """Register ``func`` under ``name`` (the name used in specs and the CLI)."""
+    doc = inspect.getdoc(func) or ""
+    method = Method(name, func, summary or (doc.splitlines()[0] if doc else ""), label or name)
+    _REGISTRY[name] = method
+    return method
+
+
+def get_method(name: str) -> Method:
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise UnknownMethodError(
+            f"unknown method {name!r}; registered methods: {', '.join(sorted(_REGISTRY))}"
+        ) from None
+
+
+def methods() -> dict[str, Method]:
+    """All registered methods by name."""
+    return dict(_REGISTRY)
+
+
+register("lqr", baselines.lqr, label="LQR (centralized)")
+register("autonomous", baselines.autonomous, label="Autonomous (u = 0)")
+register("decentralized", baselines.decentralized, label="Decentralized (diagonal K)")

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import baselines
+import codesign
 
 __all__ = ["Method", "register", "get_method", "methods", "UnknownMethodError"]
 
@@ -101,3 +102,8 @@ def methods() -> dict[str, Method]:
 register("lqr", baselines.lqr, label="LQR (centralized)")
 register("autonomous", baselines.autonomous, label="Autonomous (u = 0)")
 register("decentralized", baselines.decentralized, label="Decentralized (diagonal K)")
+register("grnn", codesign.grnn_method("given"), label="GRNN")
+register("grnn_dense", codesign.grnn_method("dense"), label="GRNN-Dense")
+register("grnn_fixed", codesign.grnn_method("fixed"), label="GRNN-Fixed")
+register("grnn_sparse", codesign.grnn_method("sparse"), label="GRNN-Sparse")
+register("gcnn", baselines.gcnn, label="GCNN")

@@ -58,13 +58,16 @@ def main():
               help="Result store file (default: <out>/results.sqlite).")
 @click.option("--workers", type=int, default=None,
               help="Worker processes (default: number of CPU cores; 1 runs in this process).")
+@click.option("--executor", default="process", show_default=True,
+              help="Where runs execute: 'process' (local pool), 'dask-local' (a local dask cluster) "
+                   "or 'dask://HOST:PORT' (a running dask scheduler).")
 @click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
-def run(experiment, out, store_path, workers, progress):
+def run(experiment, out, store_path, workers, executor, progress):
     """Run an experiment (a preset name or a TOML spec file), then write its report.
 
     Runs already in the store are skipped, so an interrupted run resumes where it stopped.
     """
-    from .runner import run_experiment
+    from .runner import ExecutorError, run_experiment
 
     try:
         spec = load_spec(experiment)
@@ -77,7 +80,10 @@ def run(experiment, out, store_path, workers, progress):
     store = _open_store(_store_path(out, store_path))
     with store:
         try:
-            summary = run_experiment(spec, store, workers=workers, progress=progress)
+            summary = run_experiment(spec, store, workers=workers, progress=progress,
+                                     executor=None if executor == "process" else executor)
+        except ExecutorError as exc:
+            raise UserError(str(exc)) from None
         except KeyboardInterrupt:
             click.echo(f"\ninterrupted: {len(store)} runs are stored in {store.path}; "
                        "run the same command again to resume.", err=True)

@@ -13,6 +13,7 @@ import os
 import time
 from collections import Counter
 from concurrent.futures import FIRST_COMPLETED, Executor, ProcessPoolExecutor, wait
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 
 from tqdm.auto import tqdm
@@ -23,7 +24,7 @@ from .registry import get_method
 from .spec import ExperimentSpec, Run
 from .store import Store
 
-__all__ = ["build_instance", "execute_run", "run_experiment", "RunSummary", "make_executor"]
+__all__ = ["build_instance", "execute_run", "run_experiment", "RunSummary", "make_executor", "open_executor"]
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
 
@@ -103,6 +104,55 @@ def make_executor(workers: int) -> Executor:
                 os.environ[var] = value
 
 
+class ExecutorError(ValueError):
+    """An executor address that cannot be used."""
+
+
+@contextmanager
+def open_executor(address: str, workers: int):
+    """An executor for ``address``, closed on exit.
+
+    ``"process"`` (the default) is a local pool of ``workers`` processes;
+    ``"dask-local"`` starts a local dask.distributed cluster of ``workers``
+    single-threaded worker processes; ``"dask://HOST:PORT"`` (or ``tcp://``)
+    connects to a running scheduler. Dask runs go through the client's
+    ``concurrent.futures`` interface; only this process writes to the store.
+    """
+    if address == "process":
+        pool = make_executor(workers)
+        try:
+            yield pool
+        finally:
+            pool.shutdown(wait=False, cancel_futures=True)
+        return
+    if address == "dask-local" or address.startswith(("dask://", "tcp://")):
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:  # pragma: no cover
+            raise ExecutorError("dask.distributed is not installed: pip install 'dask[distributed]'") from None
+        cluster = None
+        if address == "dask-local":
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40)
+            client = Client(cluster)
+        else:
+            target = "tcp://" + address.split("://", 1)[1]
+            try:
+                client = Client(target, timeout="10s")
+            except (OSError, TimeoutError) as exc:
+                raise ExecutorError(f"cannot reach the dask scheduler at {target}: {exc}") from None
+        try:
+            yield client.get_executor(pure=False)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        return
+    raise ExecutorError(
+        f"unknown executor {address!r}: use 'process', 'dask-local' or 'dask://HOST:PORT'"
+    )
+
+
 @dataclass
 class RunSummary:
     """What a call of :func:`run_experiment` did."""
@@ -122,12 +172,26 @@ class RunSummary:
         return "; ".join(parts)
 
 
+def _drain(pool: Executor, pending: list[Run], record) -> None:
+    futures = {pool.submit(execute_run, run): run for run in pending}
+    try:
+        remaining = set(futures)
+        while remaining:
+            finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
+            for future in finished:
+                record(futures[future], *future.result())
+    except BaseException:
+        for future in futures:
+            future.cancel()
+        raise
+
+
 def run_experiment(
     spec: ExperimentSpec,
     store: Store,
     *,
     workers: int = 1,
-    executor: Executor | None = None,
+    executor: Executor | str | None = None,
     progress: bool = True,
 ) -> RunSummary:
     """Execute every run of ``spec`` not yet in ``store``.
@@ -139,8 +203,10 @@ def run_experiment(
         Finished runs are committed one by one as they complete.
     workers : int
         Worker processes; 1 runs everything in this process.
-    executor : concurrent.futures.Executor, optional
-        Use this executor instead of a local process pool (e.g. a Dask client's).
+    executor : concurrent.futures.Executor or str, optional
+        An executor to submit runs to, or an address for :func:`open_executor`
+        (``"process"``, ``"dask-local"``, ``"dask://HOST:PORT"``). By default a
+        local process pool of ``workers`` processes (none when ``workers == 1``).
     progress : bool
         Show a tqdm progress bar.
     """
@@ -159,26 +225,16 @@ def run_experiment(
         bar.update(1)
 
     try:
-        if executor is None and workers <= 1:
+        if not pending:
+            pass
+        elif executor is None and workers <= 1:
             for run in pending:
                 record(run, *execute_run(run))
+        elif isinstance(executor, Executor):
+            _drain(executor, pending, record)
         else:
-            own = executor is None
-            pool = make_executor(workers) if own else executor
-            try:
-                futures = {pool.submit(execute_run, run): run for run in pending}
-                remaining = set(futures)
-                while remaining:
-                    finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
-                    for future in finished:
-                        record(futures[future], *future.result())
-            except BaseException:
-                for future in futures:
-                    future.cancel()
-                raise
-            finally:
-                if own:
-                    pool.shutdown(wait=False, cancel_futures=True)
+            with open_executor(executor or "process", workers) as pool:
+                _drain(pool, pending, record)
     finally:
         bar.close()
         summary.seconds = time.perf_counter() - start

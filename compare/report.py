@@ -24,6 +24,9 @@ from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter  # noqa: 
 
 __all__ = [
     "Point",
+    "pareto_front",
+    "budget_costs",
+    "plant_links",
     "aggregate",
     "plot_cost_vs_links",
     "write_report",
@@ -105,12 +108,70 @@ def aggregate(records: list[dict]) -> list[Point]:
     return points
 
 
+def pareto_front(points: list[Point]) -> list[Point]:
+    """The points no other point beats on both median links and median cost."""
+    ok = sorted((p for p in points if p.ok > 0 and np.isfinite(p.cost[1])), key=lambda p: (p.links[1], p.cost[1]))
+    front, best = [], float("inf")
+    for p in ok:
+        if p.cost[1] < best:
+            front.append(p)
+            best = p.cost[1]
+    return front
+
+
+def budget_costs(records: list[dict], budgets=(20, 60, 140, None)) -> dict:
+    """Per (panel, label): median over instances of the best cost within each link budget.
+
+    For each instance, a method's best cost under budget b is the lowest cost among
+    its designs with at most b links (None = any number); instances where no design
+    fits count as missing. Returns ``{(panel, label): [(median, instances), ...]}``.
+    """
+    best: dict[tuple, dict] = defaultdict(lambda: defaultdict(dict))
+    for r in records:
+        if r["status"] not in ("optimal", "inaccurate") or not np.isfinite(r["cost"]):
+            continue
+        key = (panel_key(r["instance"]), r["label"])
+        inst = json.dumps(r["instance"], sort_keys=True)
+        for b in budgets:
+            if b is None or r["links"] <= b:
+                current = best[key][b].get(inst, float("inf"))
+                best[key][b][inst] = min(current, r["cost"])
+    return {
+        key: [(quartiles(list(per[b].values()))[1], len(per[b])) for b in budgets]
+        for key, per in sorted(best.items())
+    }
+
+
+_PLANT_CACHE: dict[str, int] = {}
+
+
+def plant_links(records: list[dict]) -> dict:
+    """Median off-diagonal plant-graph links per panel (paper family): the QI boundary.
+
+    Below this many links no communication graph is quadratically invariant on the
+    paper's family, so no convex delay-constrained (SLS) design exists there.
+    """
+    from codesign import count_links, paper_instance
+
+    per_panel = defaultdict(list)
+    for inst in {json.dumps(r["instance"], sort_keys=True) for r in records}:
+        spec = json.loads(inst)
+        if spec.get("family") != "paper":
+            continue
+        if inst not in _PLANT_CACHE:
+            kwargs = {k: v for k, v in spec.items() if k != "family"}
+            _PLANT_CACHE[inst] = count_links(paper_instance(**kwargs).plant_adj)[0]
+        per_panel[panel_key(spec)].append(_PLANT_CACHE[inst])
+    return {panel: float(np.median(v)) for panel, v in per_panel.items()}
+
+
 def _label_colors(labels) -> dict:
     cmap = plt.get_cmap("tab10" if len(labels) <= 10 else "tab20")
     return {label: cmap(i % cmap.N) for i, label in enumerate(labels)}
 
 
-def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = None):
+def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = None,
+                       boundaries: dict | None = None):
     """Median cost against median links per design setting, one panel per instance family/size/a_norm.
 
     Error bars span the 25–75 % quantiles on both axes; the x-axis is symmetric-log
@@ -125,6 +186,8 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
         One per panel; a new figure is made if omitted.
     colors : dict, optional
         Label -> colour.
+    boundaries : dict, optional
+        Panel -> link count of the plant graph, drawn as the QI boundary.
 
     Returns
     -------
@@ -165,6 +228,10 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
         ax.set_ylabel("normalized cost E[J] / tr(P) (median, IQR bars)")
         ax.set_title(panel_title(panel))
         ax.axhline(1.0, color="0.6", linewidth=0.8, zorder=0)
+        if boundaries and panel in boundaries:
+            ax.axvline(boundaries[panel], color="0.35", linestyle=(0, (1, 2)), linewidth=1.0, zorder=0)
+            ax.annotate("plant graph\n(QI boundary)", (boundaries[panel], 1.0), xytext=(-4, 4),
+                        textcoords="offset points", ha="right", va="bottom", fontsize=7, color="0.35")
         ax.grid(True, which="major", alpha=0.3)
     handles = [Line2D([], [], color=colors[label], marker="o", linestyle="-", label=label) for label in labels]
     used = sorted({p.info_model for p in points if p.ok > 0}, key=list(INFO_STYLE).index)
@@ -223,6 +290,33 @@ def _summary_tables(points: list[Point]) -> list[str]:
     return lines
 
 
+def _budget_tables(records: list[dict], budgets=(20, 60, 140, None)) -> list[str]:
+    table = budget_costs(records, budgets)
+    heads = [f"≤ {b} links" if b is not None else "any" for b in budgets]
+    lines = []
+    for panel in sorted({key[0] for key in table}):
+        lines += [f"### {panel_title(panel)}", "", "| method | " + " | ".join(heads) + " |",
+                  "|---|" + "---:|" * len(budgets)]
+        for (pnl, label), cells in table.items():
+            if pnl != panel:
+                continue
+            text = [f"{_fmt(m)} ({k})" if k else "—" for m, k in cells]
+            lines.append(f"| {label} | " + " | ".join(text) + " |")
+        lines.append("")
+    return lines
+
+
+def _pareto_tables(points: list[Point]) -> list[str]:
+    lines = []
+    for panel in sorted({p.panel for p in points}):
+        lines += [f"### {panel_title(panel)}", "", "| method | front: (median links, median cost) |", "|---|---|"]
+        for label in sorted({p.label for p in points if p.panel == panel}):
+            front = pareto_front([p for p in points if p.panel == panel and p.label == label])
+            lines.append(f"| {label} | " + ", ".join(f"({_fmt(p.links[1], 3)}, {_fmt(p.cost[1])})" for p in front) + " |")
+        lines.append("")
+    return lines
+
+
 def _write_csv(records: list[dict], path: Path) -> None:
     instance_keys = sorted({k for r in records for k in r["instance"]})
     columns = ["label", "method", "params", "status", "cost", "cost_stderr", "cost_kind", "links", "self_loops",
@@ -270,9 +364,10 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     out.mkdir(parents=True, exist_ok=True)
     records = sorted(records, key=lambda r: (json.dumps(r["instance"], sort_keys=True), r["label"], r["run_key"], r["idx"]))
     points = aggregate(records)
+    boundaries = plant_links(records)
     files = {}
     with plt.rc_context({"svg.hashsalt": "compare-report", "svg.fonttype": "path"}):
-        fig, _ = plot_cost_vs_links(points)
+        fig, _ = plot_cost_vs_links(points, boundaries=boundaries)
         files["png"] = out / "cost_vs_links.png"
         files["svg"] = out / "cost_vs_links.svg"
         fig.savefig(files["png"], dpi=130, bbox_inches="tight", metadata={"Software": None})
@@ -303,6 +398,21 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         "",
     ]
     lines += _summary_tables(points)
+    lines += [
+        "## Best cost within a link budget",
+        "",
+        "Per instance, the lowest cost a method reaches with at most that many links; the median over "
+        "instances, with the number of instances where some design fits in parentheses.",
+        "",
+    ]
+    lines += _budget_tables(records)
+    lines += ["## Pareto fronts", "", "Settings no other setting of the same method beats on both median "
+              "links and median cost.", ""]
+    lines += _pareto_tables(points)
+    if boundaries:
+        lines += ["The dotted vertical line in the figure is the median number of off-diagonal plant-graph "
+                  "links: below it no communication graph is quadratically invariant on this family, so no "
+                  "convex delay-constrained design exists there (DESIGN.md §5).", ""]
     lines += ["## Runs by status", "", "| status | designs |", "|---|---:|"]
     lines += [f"| {status} | {count} |" for status, count in sorted(statuses.items())]
     failures = [r for r in records if r["status"] != "optimal"]
@@ -312,11 +422,46 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
             inst = ", ".join(f"{k}={v}" for k, v in r["instance"].items() if k != "family")
             lines.append(f"| {inst} | {r['label']} | {r['status']} | {r['message'][:160]} |")
     lines += ["", "## Files", "", "- `cost_vs_links.png`, `cost_vs_links.svg`: the figure above",
-              "- `runs.csv`: every design of every run", ""]
+              "- `runs.csv`: every design of every run",
+              "- `report.html`: this page, self-contained", ""]
     lines += ["## Software", "", "| package | version |", "|---|---|"]
     lines += [f"| {k} | {v} |" for k, v in software_versions().items()]
     for name, text in sorted((specs or {}).items()):
         lines += ["", f"## Spec `{name}`", "", "```toml", text.strip(), "```"]
     files["md"] = out / "report.md"
     files["md"].write_text("\n".join(lines) + "\n")
+    files["html"] = out / "report.html"
+    files["html"].write_text(render_html(files["md"].read_text(), out, title))
     return files
+
+
+_CSS = """
+body { font-family: system-ui, sans-serif; max-width: 1200px; margin: 2em auto; padding: 0 1em; color: #222; }
+table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.9em; }
+th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; }
+th { background: #f3f3f3; }
+img { max-width: 100%; }
+pre { background: #f6f6f6; padding: 0.8em; overflow-x: auto; }
+code { font-size: 0.92em; }
+"""
+
+
+def render_html(markdown_text: str, folder: Path, title: str) -> str:
+    """One self-contained HTML page from the Markdown report (figures inlined as base64)."""
+    import base64
+    import re
+
+    import markdown
+
+    body = markdown.markdown(markdown_text, extensions=["tables", "fenced_code"])
+
+    def inline(match):
+        path = folder / match.group(1)
+        if not path.is_file() or path.suffix.lower() != ".png":
+            return match.group(0)
+        data = base64.b64encode(path.read_bytes()).decode()
+        return f'src="data:image/png;base64,{data}"'
+
+    body = re.sub(r'src="([^":]+)"', inline, body)
+    return (f"<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>{title}</title>\n"
+            f"<style>{_CSS}</style>\n</head>\n<body>\n{body}\n</body>\n</html>\n")

@@ -42,7 +42,7 @@ def test_run_then_rerun_and_report(tmp_path):
     first = runner.invoke(main, ["run", str(spec), "--out", str(out), "--workers", "1", "--no-progress"])
     assert first.exit_code == 0, first.output
     assert "12 computed" in first.output
-    for name in ("report.md", "cost_vs_links.png", "cost_vs_links.svg", "runs.csv", "results.sqlite"):
+    for name in ("report.md", "report.html", "cost_vs_links.png", "cost_vs_links.svg", "runs.csv", "results.sqlite"):
         assert (out / name).is_file()
     report = (out / "report.md").read_text()
     assert "LQR (centralized)" in report and "Autonomous" in report and "Decentralized" in report

@@ -24,7 +24,16 @@ from .registry import get_method
 from .spec import ExperimentSpec, Run
 from .store import Store
 
-__all__ = ["build_instance", "execute_run", "run_experiment", "RunSummary", "make_executor", "open_executor"]
+__all__ = [
+    "build_instance",
+    "execute_run",
+    "execute_task",
+    "plan_tasks",
+    "run_experiment",
+    "RunSummary",
+    "make_executor",
+    "open_executor",
+]
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
 
@@ -52,25 +61,69 @@ def _noise_cost(instance, design: Design, evaluation) -> tuple[float, float]:
     return rollout.cost, rollout.stderr
 
 
+def _score_noise(instance, designs: list[Design], evaluation) -> list[Design]:
+    if evaluation.noise_std <= 0:
+        return designs
+    scored = []
+    for design in designs:
+        if design.controller is not None and design.status in ("optimal", "inaccurate"):
+            cost, stderr = _noise_cost(instance, design, evaluation)
+            extras = dict(design.extras, noise_std=evaluation.noise_std, noise_cost=cost, noise_cost_stderr=stderr)
+            design = replace(design, extras=extras)
+        scored.append(design)
+    return scored
+
+
+def _failed(run: Run, exc: Exception) -> list[Design]:
+    return [Design.failure(run.method, run.params, "failed", f"{type(exc).__name__}: {exc}")]
+
+
 def execute_run(run: Run) -> tuple[list[Design], float]:
     """Run one method on one instance; any exception becomes a ``failed`` design."""
     start = time.perf_counter()
     try:
         instance = build_instance(run.instance)
-        designs = get_method(run.method)(instance, **run.params)
-        if run.evaluation.noise_std > 0:
-            scored = []
-            for design in designs:
-                if design.controller is not None and design.status in ("optimal", "inaccurate"):
-                    cost, stderr = _noise_cost(instance, design, run.evaluation)
-                    extras = dict(design.extras, noise_std=run.evaluation.noise_std,
-                                  noise_cost=cost, noise_cost_stderr=stderr)
-                    design = replace(design, extras=extras)
-                scored.append(design)
-            designs = scored
+        designs = _score_noise(instance, get_method(run.method)(instance, **run.params), run.evaluation)
     except Exception as exc:  # a failing method is a recorded status, never a crashed sweep
-        designs = [Design.failure(run.method, run.params, "failed", f"{type(exc).__name__}: {exc}")]
+        designs = _failed(run, exc)
     return designs, time.perf_counter() - start
+
+
+def execute_task(runs: list[Run]) -> list[tuple[list[Design], float]]:
+    """Run a group of runs of one method; a batched method designs them in one call.
+
+    Returns ``(designs, seconds)`` per run, in order; the seconds of a batched call
+    are shared equally. If the batched call fails as a whole, each run is retried
+    alone so that one bad run cannot fail its neighbours.
+    """
+    method = get_method(runs[0].method)
+    if len(runs) == 1 or method.batch is None:
+        return [execute_run(run) for run in runs]
+    start = time.perf_counter()
+    try:
+        instances = [build_instance(run.instance) for run in runs]
+        results = method.run_batch([(inst, run.params) for inst, run in zip(instances, runs)])
+        results = [_score_noise(inst, designs, run.evaluation) for inst, designs, run in zip(instances, results, runs)]
+    except Exception:
+        return [execute_run(run) for run in runs]
+    share = (time.perf_counter() - start) / len(runs)
+    return [(designs, share) for designs in results]
+
+
+def plan_tasks(runs: list[Run]) -> list[list[Run]]:
+    """Group runs into tasks: batched methods get up to ``batch_size`` runs per task."""
+    tasks, groups = [], {}
+    for run in runs:
+        method = get_method(run.method)
+        if method.batch is None:
+            tasks.append([run])
+        else:
+            groups.setdefault(run.method, []).append(run)
+    for name, group in groups.items():
+        size = get_method(name).batch_size
+        tasks += [group[i:i + size] for i in range(0, len(group), size)]
+    # Largest tasks first keeps workers busy to the end.
+    return sorted(tasks, key=len, reverse=True)
 
 
 def _limit_threads() -> None:
@@ -172,14 +225,15 @@ class RunSummary:
         return "; ".join(parts)
 
 
-def _drain(pool: Executor, pending: list[Run], record) -> None:
-    futures = {pool.submit(execute_run, run): run for run in pending}
+def _drain(pool: Executor, tasks: list[list[Run]], record) -> None:
+    futures = {pool.submit(execute_task, task): task for task in tasks}
     try:
         remaining = set(futures)
         while remaining:
             finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
             for future in finished:
-                record(futures[future], *future.result())
+                for run, result in zip(futures[future], future.result()):
+                    record(run, *result)
     except BaseException:
         for future in futures:
             future.cancel()
@@ -228,13 +282,14 @@ def run_experiment(
         if not pending:
             pass
         elif executor is None and workers <= 1:
-            for run in pending:
-                record(run, *execute_run(run))
+            for task in plan_tasks(pending):
+                for run, result in zip(task, execute_task(task)):
+                    record(run, *result)
         elif isinstance(executor, Executor):
-            _drain(executor, pending, record)
+            _drain(executor, plan_tasks(pending), record)
         else:
             with open_executor(executor or "process", workers) as pool:
-                _drain(pool, pending, record)
+                _drain(pool, plan_tasks(pending), record)
     finally:
         bar.close()
         summary.seconds = time.perf_counter() - start

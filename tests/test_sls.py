@@ -279,3 +279,38 @@ def test_registered(inst):
     get_method("sls").check_params({"graph": "plant^2", "speed": 3, "act_delay": 1, "fir": 20})
     with pytest.raises(ValueError):
         get_method("sls").check_params({"grpah": "plant"})
+
+
+def test_fir_costs_bound_the_finite_horizon_cost(small):
+    finite = sls(small)
+    designs = {F: sls(small, fir=F) for F in (6, 9, 12)}
+    assert designs[12].status == "optimal", designs[12].message
+    costs = [designs[F].cost for F in (6, 9, 12) if designs[F].status == "optimal"]
+    # FIR maps with F <= T are feasible for the finite-horizon QP; longer FIRs contain shorter ones.
+    assert all(c >= finite.cost - 1e-9 for c in costs)
+    assert all(b <= a + 1e-9 for a, b in zip(costs, costs[1:]))
+
+
+# -- paper scale ------------------------------------------------------------------------
+@pytest.mark.slow
+@pytest.mark.parametrize("a_norm", [0.995, 1.05])
+def test_paper_family_facts(a_norm):
+    for seed in range(5):
+        instance = paper_instance(seed, a_norm=a_norm)
+        designs = {d.params["graph"]: d for d in sls_topologies(instance)}
+        assert designs["given"].status == "infeasible"
+        assert not is_quadratically_invariant(instance, instance.comm_adj).qi
+        assert designs["plant"].status == "optimal" and designs["plant"].extras["qi"]
+        costs = [designs[g].cost for g in ("plant", "plant^2", "plant^3", "complete")]
+        assert all(b <= a * (1 + 1e-7) for a, b in zip(costs, costs[1:]))
+        fir = sls(instance, fir=20)
+        assert fir.cost >= designs["plant"].cost - 1e-7
+        assert simulate(instance, fir.controller, steps=500, noise_std=1.0, seed=seed).bounded
+
+
+@pytest.mark.slow
+def test_n100_fir_completes():
+    instance = paper_instance(0, n=100)
+    design = sls(instance, fir=15)
+    assert design.status == "optimal", design.message
+    assert 1.0 - 1e-9 <= design.cost < 2.0

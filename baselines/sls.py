@@ -56,6 +56,8 @@ TOPOLOGY_FAMILY = ("given", "plant", "plant^2", "plant^3", "complete")
 # A solve whose normalized objective is this far from the realized closed loop's
 # exact cost did not really solve the QP (residuals in the dynamics).
 _REALIZATION_RTOL = 1e-5
+# Normalized costs are >= 1; the autonomous system on this family is below 1e3.
+_ABSURD_OBJECTIVE = 1e8
 _GRAPH_NAME = re.compile(r"^(given|plant)(?:\^([1-9][0-9]*))?$")
 
 
@@ -247,9 +249,9 @@ def _solve_qp(instance, dist, T, *, speed, act_delay, fir):
         # The SciPy canonicalization backend compiles one big sparse product fastest.
         problem.solve(solver=cp.CLARABEL, canon_backend=cp.SCIPY_CANON_BACKEND)
     except cp.error.SolverError as exc:
-        info.update(status="solver_error", error=str(exc))
+        info.update(solver_status="solver_error", error=str(exc))
         return None, None, info
-    info["status"] = problem.status
+    info["solver_status"] = problem.status
     stats = problem.solver_stats
     info["solve_seconds"] = float(stats.solve_time) if stats and stats.solve_time is not None else float("nan")
     info["iterations"] = int(stats.num_iters) if stats and stats.num_iters is not None else -1
@@ -345,7 +347,7 @@ def sls(
         X, U, info = _solve_qp(instance, hop_distances(adj), T, speed=speed, act_delay=act_delay,
                                fir=fir is not None)
     extras.update({k: v for k, v in info.items() if k != "error"})
-    status = info["status"]
+    status = info["solver_status"]
 
     def fail(kind, message):
         return Design.failure("sls", params, kind, message, info_model="delayed", seconds=timer.seconds,
@@ -357,6 +359,8 @@ def sls(
         return fail("infeasible", why)
     if X is None:
         return fail("failed", f"solver status {status!r}" + (f": {info['error']}" if "error" in info else ""))
+    if not np.isfinite(info["objective"]) or info["objective"] > _ABSURD_OBJECTIVE:
+        return fail("failed", f"solver said optimal with an absurd normalized objective {info['objective']:.3g}")
 
     controller = SLSController(X, U)
     cost = response_cost(instance, *controller.closed_loop_responses(instance))

@@ -4,7 +4,7 @@ Each line is one cold solve in this process (matrix building, cvxpy compilation,
 Clarabel setup and solve, realization and exact scoring), on the plant graph at
 one hop per step. N = 20 and 50 use the full finite-horizon QP (T = 50); N = 100
 uses the FIR variant (F = 15) by default, ``--full`` also runs its T = 50 QP
-(about 75 s and 4.5 GB on 2 cores).
+(50-75 s and 4.5 GB of memory on 2 cores).
 
 Run: ``OMP_NUM_THREADS=1 python benchmarks/bench_sls.py [--full]``
 """

@@ -224,11 +224,19 @@ def test_fir_too_short_is_infeasible_not_an_exception(inst):
 # -- statuses and inputs ------------------------------------------------------------
 def test_solver_trouble_is_a_status(inst, monkeypatch):
     monkeypatch.setattr(
-        sls_module, "_solve_qp", lambda *a, **k: (None, None, {"status": "optimal_inaccurate"})
+        sls_module, "_solve_qp", lambda *a, **k: (None, None, {"solver_status": "optimal_inaccurate"})
     )
     design = sls(inst)
     assert design.status == "failed" and "optimal_inaccurate" in design.message
     assert np.isnan(design.cost) and design.links > 0
+
+    T, n = inst.horizon, inst.n
+    X, U = np.zeros((T + 1, n, n)), np.zeros((T, n, n))
+    X[0] = np.eye(n)
+    absurd = {"solver_status": "optimal", "objective": 1e29, "residual": 0.0}
+    monkeypatch.setattr(sls_module, "_solve_qp", lambda *a, **k: (X, U, absurd))
+    design = sls(inst)
+    assert design.status == "failed" and "absurd" in design.message and np.isnan(design.cost)
 
     def broken(*a, **k):
         raise sls_module.cp.error.SolverError("boom")

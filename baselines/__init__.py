@@ -1,11 +1,28 @@
-"""Classical baselines: centralized LQR, autonomous, decentralized static gains.
+"""Classical baselines: centralized LQR, autonomous, decentralized static gains, SLS.
 
 Public names::
 
     from baselines import lqr, autonomous, decentralized, polish_gain
+    from baselines import sls, sls_topologies, is_quadratically_invariant
 """
 
 from .lqr import autonomous, decentralized, lqr
 from .polish import PolishResult, polish_gain
+from .qi import QIResult, is_quadratically_invariant
+from .sls import TOPOLOGY_FAMILY, SLSController, noisy_response_cost, sls, sls_topologies, topology
 
-__all__ = ["lqr", "autonomous", "decentralized", "polish_gain", "PolishResult"]
+__all__ = [
+    "lqr",
+    "autonomous",
+    "decentralized",
+    "polish_gain",
+    "PolishResult",
+    "sls",
+    "sls_topologies",
+    "SLSController",
+    "noisy_response_cost",
+    "topology",
+    "TOPOLOGY_FAMILY",
+    "is_quadratically_invariant",
+    "QIResult",
+]

@@ -132,3 +132,5 @@ def methods() -> dict[str, Method]:
 register("lqr", baselines.lqr, label="LQR (centralized)")
 register("autonomous", baselines.autonomous, label="Autonomous (u = 0)")
 register("decentralized", baselines.decentralized, label="Decentralized (diagonal K)")
+register("sls", baselines.sls, label="SLS (delay constraints)")
+register("sls_topologies", baselines.sls_topologies, label="SLS (topology family)")

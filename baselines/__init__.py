@@ -9,7 +9,7 @@ Public names::
 from .lqr import autonomous, decentralized, lqr
 from .polish import PolishResult, polish_gain
 from .qi import QIResult, is_quadratically_invariant
-from .sls import TOPOLOGY_FAMILY, SLSController, noisy_response_cost, sls, sls_topologies, topology
+from .sls import TOPOLOGY_FAMILY, SLSController, sls, sls_topologies, topology
 
 __all__ = [
     "lqr",
@@ -20,7 +20,6 @@ __all__ = [
     "sls",
     "sls_topologies",
     "SLSController",
-    "noisy_response_cost",
     "topology",
     "TOPOLOGY_FAMILY",
     "is_quadratically_invariant",

@@ -46,7 +46,6 @@ __all__ = [
     "sls_topologies",
     "topology",
     "support_hops",
-    "noisy_response_cost",
     "TOPOLOGY_FAMILY",
 ]
 
@@ -172,33 +171,10 @@ class SLSController:
 
     def predicted_cost(self, instance, *, noise_std: float = 0.0) -> float:
         """Exact normalized E[J] of the closed loop, with process noise of ``noise_std``."""
-        return noisy_response_cost(instance, *self.closed_loop_responses(instance), noise_std=noise_std)
+        return response_cost(instance, *self.closed_loop_responses(instance), noise_std=noise_std)
 
     def __repr__(self):
         return f"SLSController(n={self.n}, taps={self.length})"
-
-
-def noisy_response_cost(instance, phi_x, phi_u, *, noise_std: float = 0.0) -> float:
-    """Normalized E[J] of a time-invariant linear closed loop under process noise.
-
-    With ``w(t) ~ N(0, noise_std² I)`` added to ``x(t+1)`` for t = 0..T−1, the
-    noise entering at time s is answered by the same maps shifted by s, with
-    T − s steps left. Writing c(m) for the cost of the maps over horizon m (terminal
-    P at m), ``E[J] = c(T) + noise_std² · sum_{m=0}^{T-1} c(m)``.
-    ``noise_std = 0`` gives :func:`codesign.response_cost`.
-    """
-    phi_x = np.asarray(phi_x, dtype=float)
-    phi_u = np.asarray(phi_u, dtype=float)
-    T = instance.horizon
-    response_cost(instance, phi_x, phi_u)  # validates the shapes
-    if not (np.isfinite(noise_std) and noise_std >= 0):
-        raise ValueError(f"noise_std must be a non-negative number, got {noise_std!r}")
-    stage = np.einsum("tij,ik,tkj->t", phi_x[:T], instance.Q, phi_x[:T])
-    stage += np.einsum("tij,ik,tkj->t", phi_u, instance.R, phi_u)
-    terminal = np.einsum("tij,ik,tkj->t", phi_x, instance.P, phi_x)
-    horizon_cost = np.concatenate([[0.0], np.cumsum(stage)]) + terminal  # c(m), m = 0..T
-    total = horizon_cost[T] + noise_std**2 * horizon_cost[:T].sum()
-    return float(total / instance.trace_P)
 
 
 # -- the QP ------------------------------------------------------------------------

@@ -9,7 +9,6 @@ import baselines
 from baselines import (
     SLSController,
     is_quadratically_invariant,
-    noisy_response_cost,
     sls,
     sls_topologies,
     topology,
@@ -155,7 +154,7 @@ def test_noise_prediction_agrees_with_static_gain_formula(inst):
     phi_x = np.stack([np.linalg.matrix_power(Acl, t) for t in range(inst.horizon + 1)])
     phi_u = np.einsum("ij,tjk->tik", K, phi_x[:-1])
     for noise_std in (0.0, 0.4):
-        assert noisy_response_cost(inst, phi_x, phi_u, noise_std=noise_std) == pytest.approx(
+        assert response_cost(inst, phi_x, phi_u, noise_std=noise_std) == pytest.approx(
             static_gain_cost(inst, K, noise_std=noise_std), rel=1e-10
         )
 

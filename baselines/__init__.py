@@ -1,13 +1,32 @@
-"""Classical baselines: centralized LQR, autonomous, decentralized static gains.
+"""Classical baselines: centralized LQR, autonomous, decentralized static gains, SLS.
 
 Public names::
 
-    from baselines import lqr, autonomous, decentralized, polish_gain, gcnn
+    from baselines import lqr, autonomous, decentralized, polish_gain
+    from baselines import sls, sls_topologies, is_quadratically_invariant
+    from baselines import gcnn, gcnn_batch, GCNNController
 """
 
 from .gcnn import GCNNController, gcnn, gcnn_batch
 from .lqr import autonomous, decentralized, lqr
 from .polish import PolishResult, polish_gain
+from .qi import QIResult, is_quadratically_invariant
+from .sls import TOPOLOGY_FAMILY, SLSController, sls, sls_topologies, topology
 
-__all__ = ["lqr", "autonomous", "decentralized", "polish_gain", "PolishResult", "gcnn", "gcnn_batch",
-           "GCNNController"]
+__all__ = [
+    "lqr",
+    "autonomous",
+    "decentralized",
+    "polish_gain",
+    "PolishResult",
+    "sls",
+    "sls_topologies",
+    "SLSController",
+    "topology",
+    "TOPOLOGY_FAMILY",
+    "is_quadratically_invariant",
+    "QIResult",
+    "gcnn",
+    "gcnn_batch",
+    "GCNNController",
+]

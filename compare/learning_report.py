@@ -149,6 +149,7 @@ def training_curves_figure(records, ax=None):
     colors = {label: plt.cm.tab10(i % 10) for i, label in enumerate(labels)}
     shared = len(axes) == 1 and len(a_norms) > 1
     styles = ["-", "--", ":", "-."]
+    final_hi: dict[int, float] = defaultdict(float)  # per axis: highest final upper quartile
     for i, a in enumerate(a_norms):
         axis = axes[0] if shared else axes[i]
         for label, items in sorted(curves[a].items()):
@@ -160,10 +161,15 @@ def training_curves_figure(records, ax=None):
             style = styles[i % len(styles)] if shared else "-"
             axis.plot(steps, med, style, color=colors[label], label=f"{name}, n={len(costs)}")
             axis.fill_between(steps, lo, hi, color=colors[label], alpha=0.2, linewidth=0)
+            final_hi[id(axis)] = max(final_hi[id(axis)], float(hi[-1]))
         if not shared:
             axis.set_title(f"‖A‖ = {a:g}")
     for axis in axes[: (1 if shared else len(a_norms))]:
         axis.set_yscale("log")
+        # The untrained controllers start orders of magnitude higher: keep the
+        # converged region readable (the first points run off the top).
+        if final_hi.get(id(axis)):
+            axis.set_ylim(0.9, 4.0 * final_hi[id(axis)])
         axis.set_xlabel("training step")
         axis.set_ylabel("validation cost  E[J] / trace(P)")
         axis.axhline(1.0, color="0.5", linewidth=0.8)

@@ -3,9 +3,24 @@
 Public names::
 
     from baselines import lqr, autonomous, decentralized, polish_gain
+    from baselines import sparse_admm, sparse_sdp, truncated_lqr
 """
 
 from .lqr import autonomous, decentralized, lqr
 from .polish import PolishResult, polish_gain
+from .sparse_admm import admm_gamma_grid, sparse_admm
+from .sparse_sdp import SparseSDP, sparse_sdp
+from .truncation import truncated_lqr
 
-__all__ = ["lqr", "autonomous", "decentralized", "polish_gain", "PolishResult"]
+__all__ = [
+    "lqr",
+    "autonomous",
+    "decentralized",
+    "polish_gain",
+    "PolishResult",
+    "sparse_admm",
+    "admm_gamma_grid",
+    "sparse_sdp",
+    "SparseSDP",
+    "truncated_lqr",
+]

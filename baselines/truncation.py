@@ -8,6 +8,8 @@ cost.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from codesign.design import Design
@@ -73,5 +75,5 @@ def truncated_lqr(instance, *, links: list | None = None, polish: bool = True) -
                 gain, extras = polished_gain(instance, instance.K_lqr, mask, polish=polish)
                 design = gain_design(instance, "truncated_lqr", params, gain, seconds=0.0,
                                      extras={"solver": "truncation", **extras}, polished=polish)
-        designs.append(design.__class__(**{**design.__dict__, "seconds": float(timer.seconds)}))
+        designs.append(replace(design, seconds=float(timer.seconds)))
     return designs

@@ -101,3 +101,6 @@ def methods() -> dict[str, Method]:
 register("lqr", baselines.lqr, label="LQR (centralized)")
 register("autonomous", baselines.autonomous, label="Autonomous (u = 0)")
 register("decentralized", baselines.decentralized, label="Decentralized (diagonal K)")
+register("sparse_admm", baselines.sparse_admm, label="Sparse K (l1 ADMM)")
+register("sparse_sdp", baselines.sparse_sdp, label="Sparse K (l1 SDP)")
+register("truncated_lqr", baselines.truncated_lqr, label="Truncated LQR K")

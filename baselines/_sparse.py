@@ -21,7 +21,7 @@ from .lqr import decentralized
 from .polish import polish_gain
 
 __all__ = ["GRAD_RTOL", "check_gammas", "pattern_of", "polished_gain", "gain_design",
-           "as_path_point", "DecentralizedCache"]
+           "as_path_point", "design_on_pattern", "with_diagonal_end", "DecentralizedCache"]
 
 #: A polished gain counts as optimal on its pattern when the masked gradient norm
 #: of the normalized cost is below this fraction of the cost.
@@ -120,6 +120,37 @@ def as_path_point(design, method: str, params: dict, extras: dict, message: str 
                    extras={**design.extras, **extras}, message=message or design.message)
 
 
+def design_on_pattern(instance, method: str, params: dict, K, *, extras: dict, polish: bool,
+                      decentral: "DecentralizedCache") -> Design:
+    """Polish ``K`` on its own pattern (diagonal always free) and score it.
+
+    A diagonal pattern is the decentralized design, taken from
+    :func:`baselines.decentralized` when that one stabilizes.
+    """
+    mask = pattern_of(K)
+    if not (mask & ~np.eye(instance.n, dtype=bool)).any():
+        diagonal = decentral.usable()
+        if diagonal is not None:
+            return as_path_point(diagonal, method, params, {**extras, "decentralized": True})
+    gain, polish_extras = polished_gain(instance, K, mask, polish=polish)
+    return gain_design(instance, method, params, gain, seconds=0.0, extras={**extras, **polish_extras},
+                       polished=polish)
+
+
+def with_diagonal_end(designs: list, method: str, base: dict, decentral: "DecentralizedCache") -> list:
+    """Close a path at γ → ∞ with the decentralized gain if its last point still has links.
+
+    The extra point has ``params["gamma"] = inf``; a path whose last point is not
+    usable (an infeasible SDP, say) is left as it is.
+    """
+    last = designs[-1] if designs else None
+    diagonal = decentral.usable()
+    if last is None or last.status not in ("optimal", "inaccurate") or last.links == 0 or diagonal is None:
+        return designs
+    params = {**base, "gamma": float("inf")}
+    return designs + [as_path_point(diagonal, method, params, {"decentralized": True})]
+
+
 class DecentralizedCache:
     """The best diagonal gain of an instance, computed once per path."""
 
@@ -131,3 +162,10 @@ class DecentralizedCache:
         if self._design is None:
             self._design = decentralized(self.instance)
         return self._design
+
+    def usable(self) -> Design | None:
+        """The decentralized design if it has a stabilizing gain, else None."""
+        design = self.get()
+        if design.controller is None or not design.extras.get("spectral_radius", np.inf) < 1.0:
+            return None
+        return design

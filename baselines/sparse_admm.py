@@ -25,31 +25,30 @@ design reports.
 from __future__ import annotations
 
 from dataclasses import replace
-
-import numpy as np
 from typing import NamedTuple
 
-from codesign.design import Design
+import numpy as np
 
+from codesign.design import Design
 from codesign.evaluation import spectral_radius
 
 from ._common import Timer
-from ._sparse import DecentralizedCache, as_path_point, check_gammas, gain_design, pattern_of, polished_gain
+from ._sparse import DecentralizedCache, as_path_point, check_gammas, design_on_pattern, with_diagonal_end
 
 __all__ = ["sparse_admm", "admm_gamma_grid", "admm_gamma_max"]
 
-_ARMIJO = 1e-4       # sufficient-decrease constant of the line search
+_ARMIJO = 1e-4        # sufficient-decrease constant of the line search
 _BACKTRACK = 0.5
 _MAX_BACKTRACKS = 40
 _KSTEP_MAXITER = 50
-_DOUBLINGS = 60       # A_cl^(2^60): only a gain at the stability boundary needs more
-_POWER_TOL = 1e-12    # max |A_cl^(2^k)| below which the remaining terms are negligible
-_REL_TOL = 1e-2     # relative part of the ADMM residual test (lqrsp's eps_rel)
+_DOUBLINGS = 60        # A_cl^(2^60): only a gain at the stability boundary needs more
+_POWER_TOL = 1e-12     # max |A_cl^(2^k)| below which the remaining terms are negligible
+_REL_TOL = 1e-2        # relative part of the ADMM residual test (lqrsp's eps_rel)
+_WEIGHTS_SETTLED = 1e-2  # reweighting stops when the weights move less than this (relative)
 
 
 class _Point(NamedTuple):
     """A stabilizing gain with its infinite-horizon cost J = trace(P), P, L and ∇J."""
-
     K: np.ndarray
     J: float
     P: np.ndarray
@@ -145,10 +144,10 @@ def admm_gamma_max(instance) -> float:
     the decentralized gain of the benchmark (finite-horizon) cost, a close stand-in
     for the infinite-horizon one.
     """
-    K = np.array(DecentralizedCache(instance).get().controller.K)
-    point = _evaluate(instance, K)
+    diagonal = DecentralizedCache(instance).usable()
+    point = None if diagonal is None else _evaluate(instance, np.array(diagonal.controller.K))
     if point is None:
-        raise ValueError("the decentralized gain does not stabilize this instance")
+        raise ValueError("no stabilizing diagonal gain on this instance")
     grad = point.grad.copy()
     np.fill_diagonal(grad, 0.0)
     return float(np.max(np.abs(grad)))
@@ -157,9 +156,13 @@ def admm_gamma_max(instance) -> float:
 def admm_gamma_grid(instance, num: int = 10, *, decades: float = 5.0) -> list[float]:
     """Default weights: ``num`` log-spaced values ending a little above :func:`admm_gamma_max`.
 
-    The low end, ``decades`` below, leaves the LQR gain (nearly) dense.
+    The low end, ``decades`` below, leaves the LQR gain (nearly) dense. Without a
+    stabilizing diagonal gain the grid ends at trace(P) instead.
     """
-    top = 1.2 * admm_gamma_max(instance)
+    try:
+        top = 1.2 * admm_gamma_max(instance)
+    except ValueError:
+        top = instance.trace_P
     return [float(g) for g in np.geomspace(top * 10.0 ** (-decades), top, int(num))]
 
 
@@ -175,6 +178,7 @@ def sparse_admm(
     kstep_tol: float = 1e-2,
     maxiter: int = 1000,
     start: list | None = None,
+    diagonal_end: bool = True,
 ):
     """Sparse static gains along a γ path by ℓ1-regularized ADMM, polished on their patterns.
 
@@ -185,7 +189,10 @@ def sparse_admm(
         Sparsity weights (same units as trace(P)); sorted increasing. Default:
         :func:`admm_gamma_grid` (10 values up to where the gain is diagonal).
     reweight : int
-        Reweighting rounds after the first ℓ1 solve, ``w_ij = 1/(|G_ij| + eps_weight)``.
+        Weighted ℓ1 solves per γ (lqrsp's ``reweightedIter``); after each,
+        ``w_ij = 1/(|G_ij| + eps_weight)``, stopping early once the weights settle.
+        The weights carry over to the next γ, as in lqrsp; the first solve of the
+        path is plain ℓ1.
     rho : float
         ADMM penalty.
     polish : bool
@@ -193,11 +200,17 @@ def sparse_admm(
     eps_weight : float
         ε of the reweighting.
     tol : float
-        ADMM stops when ‖K − G‖_F and ‖G − G_prev‖_F are both below ``tol``.
+        Absolute ADMM tolerance per entry: stop when ‖K − G‖_F and ρ‖G − G_prev‖_F
+        fall below ``n * tol`` plus 1e-2 times ‖K‖_F (resp. ‖Λ‖_F), lqrsp's test.
+    kstep_tol : float
+        The K-step stops when the gradient of its objective has norm below this.
     maxiter : int
-        ADMM iterations per round.
+        ADMM iterations per weighted solve.
     start : array_like, shape (n, n), optional
         Stabilizing gain (``u = K x``) to start the path from; LQR by default.
+    diagonal_end : bool
+        If the largest γ still leaves links, close the path with the decentralized
+        gain as its γ → ∞ point (``params["gamma"] = inf``).
 
     Returns
     -------
@@ -237,7 +250,7 @@ def sparse_admm(
     # Weights carry along the path as in lqrsp: an entry zeroed at one γ starts the
     # next γ heavily penalized.
     W = _offdiag_ones(n)
-    previous = None  # (design, K, G, Lam, W) of the last γ whose G stabilized
+    previous = None  # (design, point, G, Lam, W) of the last γ with a usable design
     designs = []
     for gamma in gammas:
         params = {**base, "gamma": float(gamma)}
@@ -252,7 +265,7 @@ def sparse_admm(
                 converged &= ok
                 W_new = 1.0 / (np.abs(G) + eps_weight)
                 np.fill_diagonal(W_new, 0.0)
-                settled = np.linalg.norm(W_new - W) < 1e-2 * np.linalg.norm(W)
+                settled = np.linalg.norm(W_new - W) < _WEIGHTS_SETTLED * np.linalg.norm(W)
                 W = W_new
                 if settled:
                     break
@@ -260,14 +273,8 @@ def sparse_admm(
                       "reweight_rounds": rounds, "admm_converged": bool(converged), "fallback": False}
             design = None
             if _stable(instance.A + instance.B @ G):
-                mask = pattern_of(G)
-                if mask.sum() > n:
-                    gain, polish_extras = polished_gain(instance, G, mask, polish=polish)
-                    design = gain_design(instance, "sparse_admm", params, gain, seconds=0.0,
-                                         extras={**extras, **polish_extras}, polished=polish)
-                else:
-                    design = as_path_point(decentral.get(), "sparse_admm", params,
-                                           {**extras, "decentralized": True})
+                design = design_on_pattern(instance, "sparse_admm", params, G, extras=extras,
+                                           polish=polish, decentral=decentral)
                 why = design.message
             else:
                 why = "the sparse gain G found by ADMM does not stabilize"
@@ -283,7 +290,7 @@ def sparse_admm(
                 design = Design.failure("sparse_admm", params, "diverged", why, info_model="instantaneous",
                                         extras=extras)
         designs.append(replace(design, seconds=float(timer.seconds)))
-    return designs
+    return with_diagonal_end(designs, "sparse_admm", base, decentral) if diagonal_end else designs
 
 
 def _admm(instance, point, G, Lam, threshold, rho, *, tol, kstep_tol, maxiter):

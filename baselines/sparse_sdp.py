@@ -29,7 +29,7 @@ import numpy as np
 from codesign.design import Design
 
 from ._common import Timer
-from ._sparse import DecentralizedCache, as_path_point, check_gammas, gain_design, pattern_of, polished_gain
+from ._sparse import DecentralizedCache, check_gammas, design_on_pattern, with_diagonal_end
 
 __all__ = ["sparse_sdp", "SparseSDP", "sdp_gamma_grid"]
 
@@ -155,6 +155,7 @@ def sparse_sdp(
     polish: bool = True,
     threshold: float = 1e-4,
     max_iter: int = 200,
+    diagonal_end: bool = True,
 ):
     """Sparse static gains along a γ path by the ℓ1-regularized SDP, polished on their patterns.
 
@@ -173,6 +174,9 @@ def sparse_sdp(
     max_iter : int
         Clarabel's iteration limit; a solve that hits it is a ``failed`` design
         (cvxpy status ``user_limit``).
+    diagonal_end : bool
+        If the largest γ still leaves links, close the path with the decentralized
+        gain as its γ → ∞ point (``params["gamma"] = inf``).
 
     Returns
     -------
@@ -188,7 +192,6 @@ def sparse_sdp(
         raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
     if gammas is not None:
         gammas = check_gammas(gammas)
-    n = instance.n
     with Timer() as compile_timer:
         sdp = SparseSDP(instance, max_iter=max_iter)
     reuse = None
@@ -220,17 +223,12 @@ def sparse_sdp(
                 small = np.abs(Y) <= threshold * np.abs(Y).max()
                 np.fill_diagonal(small, False)
                 K = np.where(small, 0.0, result["K"])
-                mask = pattern_of(K)
-                if mask.sum() > n:
-                    gain, polish_extras = polished_gain(instance, K, mask, polish=polish)
-                    design = gain_design(instance, "sparse_sdp", params, gain, seconds=0.0,
-                                         extras={**extras, **polish_extras}, polished=polish)
-                else:
-                    design = as_path_point(decentral.get(), "sparse_sdp", params,
-                                           {**extras, "decentralized": True})
+                design = design_on_pattern(instance, "sparse_sdp", params, K, extras=extras,
+                                           polish=polish, decentral=decentral)
                 if result["status"] == "inaccurate" and design.status == "optimal":
                     design = replace(design, status="inaccurate", message=result["message"])
         designs.append(replace(design, seconds=float(timer.seconds)))
     if designs:
         designs[0] = replace(designs[0], extras={**designs[0].extras, "compile_seconds": compile_timer.seconds})
-    return designs
+    base = {"threshold": float(threshold)}
+    return with_diagonal_end(designs, "sparse_sdp", base, decentral) if diagonal_end else designs

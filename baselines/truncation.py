@@ -15,7 +15,7 @@ import numpy as np
 from codesign.design import Design
 
 from ._common import Timer
-from ._sparse import DecentralizedCache, as_path_point, gain_design, polished_gain
+from ._sparse import DecentralizedCache, design_on_pattern
 
 __all__ = ["truncated_lqr", "truncation_mask"]
 
@@ -68,12 +68,8 @@ def truncated_lqr(instance, *, links: list | None = None, polish: bool = True) -
     for count in counts:
         params = {"links": count}
         with Timer() as timer:
-            if count == 0:
-                design = as_path_point(decentral.get(), "truncated_lqr", params, {"decentralized": True})
-            else:
-                mask = truncation_mask(instance.K_lqr, count)
-                gain, extras = polished_gain(instance, instance.K_lqr, mask, polish=polish)
-                design = gain_design(instance, "truncated_lqr", params, gain, seconds=0.0,
-                                     extras={"solver": "truncation", **extras}, polished=polish)
+            K = np.where(truncation_mask(instance.K_lqr, count), instance.K_lqr, 0.0)
+            design = design_on_pattern(instance, "truncated_lqr", params, K, extras={"solver": "truncation"},
+                                       polish=polish, decentral=decentral)
         designs.append(replace(design, seconds=float(timer.seconds)))
     return designs

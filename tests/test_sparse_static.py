@@ -216,9 +216,22 @@ def test_sdp_iteration_limit_is_a_recorded_failure():
 
 def test_unpolished_points_are_exact_too():
     inst = paper_instance(1, n=8)
-    for design in sparse_admm(inst, gammas=[0.01, 0.1], polish=False):
+    designs = sparse_admm(inst, gammas=[0.01, 0.1], polish=False, diagonal_end=False)
+    assert len(designs) == 2
+    for design in designs:
         assert design.cost == static_gain_cost(inst, design.controller.K)
         assert design.extras["polish_iterations"] == 0
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_user_grid_is_closed_by_the_diagonal_gain(name):
+    inst = paper_instance(1, n=8)
+    designs = METHODS[name](inst, gammas=[1e-4, 1e-3])
+    assert [d.params["gamma"] for d in designs] == [1e-4, 1e-3, float("inf")]
+    assert designs[1].links > 0
+    end = designs[-1]
+    assert end.links == 0 and end.status == "optimal" and end.extras["decentralized"]
+    assert end.cost == pytest.approx(decentralized(inst).cost, rel=1e-12)
 
 
 def test_registry_and_preset():

@@ -1,13 +1,16 @@
-"""Classical baselines: centralized LQR, autonomous, decentralized static gains.
+"""Classical baselines: centralized LQR, autonomous, decentralized static gains, SLS.
 
 Public names::
 
     from baselines import lqr, autonomous, decentralized, polish_gain
+    from baselines import sls, sls_topologies, is_quadratically_invariant
     from baselines import sparse_admm, sparse_sdp, truncated_lqr
 """
 
 from .lqr import autonomous, decentralized, lqr
 from .polish import PolishResult, polish_gain
+from .qi import QIResult, is_quadratically_invariant
+from .sls import TOPOLOGY_FAMILY, SLSController, sls, sls_topologies, topology
 from .sparse_admm import admm_gamma_grid, sparse_admm
 from .sparse_sdp import SparseSDP, sparse_sdp
 from .truncation import truncated_lqr
@@ -18,6 +21,13 @@ __all__ = [
     "decentralized",
     "polish_gain",
     "PolishResult",
+    "sls",
+    "sls_topologies",
+    "SLSController",
+    "topology",
+    "TOPOLOGY_FAMILY",
+    "is_quadratically_invariant",
+    "QIResult",
     "sparse_admm",
     "admm_gamma_grid",
     "sparse_sdp",

@@ -83,7 +83,7 @@ def static_gain_cost_and_grad(instance, K) -> tuple[float, np.ndarray]:
     return float(np.trace(Ps[0]) / scale), 2.0 * grad / scale
 
 
-def response_cost(instance, phi_x, phi_u) -> float:
+def response_cost(instance, phi_x, phi_u, *, noise_std: float = 0.0) -> float:
     """Exact normalized cost from closed-loop response maps.
 
     Parameters
@@ -92,6 +92,12 @@ def response_cost(instance, phi_x, phi_u) -> float:
         ``x(t) = phi_x[t] x(0)`` for t = 0..T (so ``phi_x[0] = I``).
     phi_u : array_like, shape (T, n, n)
         ``u(t) = phi_u[t] x(0)`` for t = 0..T-1.
+    noise_std : float
+        Process noise ``w(t) ~ N(0, noise_std^2 I)`` added to ``x(t+1)`` for
+        t = 0..T-1, for a time-invariant closed loop: the noise entering at time s
+        is answered by the same maps with T - s steps left, so with c(m) the cost
+        of the maps over horizon m (terminal P at m),
+        ``E[J] = c(T) + noise_std^2 * sum_{m<T} c(m)``.
     """
     phi_x = np.asarray(phi_x, dtype=float)
     phi_u = np.asarray(phi_u, dtype=float)
@@ -101,10 +107,16 @@ def response_cost(instance, phi_x, phi_u) -> float:
             f"response maps must have shapes {(T + 1, n, n)} and {(T, n, n)}, "
             f"got {phi_x.shape} and {phi_u.shape}"
         )
-    Q, R = instance.Q, instance.R
-    total = np.einsum("tij,ik,tkj->", phi_x[:T], Q, phi_x[:T])
-    total += np.einsum("tij,ik,tkj->", phi_u, R, phi_u)
-    total += np.einsum("ij,ik,kj->", phi_x[T], instance.P, phi_x[T])
+    if not (np.isfinite(noise_std) and noise_std >= 0):
+        raise ValueError(f"noise_std must be a non-negative number, got {noise_std!r}")
+    stage = np.einsum("tij,ik,tkj->t", phi_x[:T], instance.Q, phi_x[:T])
+    stage += np.einsum("tij,ik,tkj->t", phi_u, instance.R, phi_u)
+    if not noise_std:
+        total = stage.sum() + np.einsum("ij,ik,kj->", phi_x[T], instance.P, phi_x[T])
+        return float(total / instance.trace_P)
+    terminal = np.einsum("tij,ik,tkj->t", phi_x, instance.P, phi_x)
+    horizon_cost = np.concatenate([[0.0], np.cumsum(stage)]) + terminal  # c(m), m = 0..T
+    total = horizon_cost[T] + noise_std**2 * horizon_cost[:T].sum()
     return float(total / instance.trace_P)
 
 
@@ -210,14 +222,12 @@ def exact_cost(instance, controller, *, noise_std: float = 0.0) -> float | None:
     """Closed-form normalized cost of a linear controller, or None if it has none.
 
     Static gains (``controller.K``) are scored by a Lyapunov recursion; dynamic
-    linear controllers by their closed-loop responses
-    (``controller.closed_loop_responses(instance) -> (phi_x, phi_u)``), noise-free only.
+    time-invariant linear controllers by their closed-loop responses
+    (``controller.closed_loop_responses(instance) -> (phi_x, phi_u)``).
     """
     if hasattr(controller, "closed_loop_responses"):
-        if noise_std:
-            return None
         phi_x, phi_u = controller.closed_loop_responses(instance)
-        return response_cost(instance, phi_x, phi_u)
+        return response_cost(instance, phi_x, phi_u, noise_std=noise_std)
     K = getattr(controller, "K", None)
     if K is None:
         return None

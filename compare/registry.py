@@ -23,12 +23,20 @@ class UnknownMethodError(KeyError):
 
 @dataclass(frozen=True)
 class Method:
-    """A registered method: its name, function, one-line summary and legend label."""
+    """A registered method: its name, function, one-line summary and legend label.
+
+    ``batch``, when given, designs many (instance, hyperparameters) pairs in one
+    call (``batch(pairs) -> list of Design or list of Design``, one entry per
+    pair, in order); the runner then hands it up to ``batch_size`` runs at once,
+    so that e.g. many GRNNs train together as one batched program.
+    """
 
     name: str
     func: Callable
     summary: str
     label: str
+    batch: Callable | None = None
+    batch_size: int = 64
 
     @property
     def hyperparameters(self) -> dict[str, inspect.Parameter]:
@@ -55,8 +63,20 @@ class Method:
                 )
 
     def __call__(self, instance, **params):
-        result = self.func(instance, **params)
-        return list(result) if isinstance(result, (list, tuple)) else [result]
+        return _as_list(self.func(instance, **params))
+
+    def run_batch(self, pairs) -> list[list]:
+        """Designs for many (instance, params) pairs: one batched call if the method has one."""
+        if self.batch is None:
+            return [self(instance, **params) for instance, params in pairs]
+        results = self.batch(list(pairs))
+        if len(results) != len(pairs):
+            raise RuntimeError(f"{self.name}: batch returned {len(results)} results for {len(pairs)} runs")
+        return [_as_list(r) for r in results]
+
+
+def _as_list(result) -> list:
+    return list(result) if isinstance(result, (list, tuple)) else [result]
 
 
 def _same_kind(default, value) -> bool:
@@ -76,10 +96,21 @@ def _same_kind(default, value) -> bool:
 _REGISTRY: dict[str, Method] = {}
 
 
-def register(name: str, func: Callable, *, label: str | None = None, summary: str | None = None) -> Method:
-    """Register ``func`` under ``name`` (the name used in specs and the CLI)."""
+def register(
+    name: str,
+    func: Callable,
+    *,
+    label: str | None = None,
+    summary: str | None = None,
+    batch: Callable | None = None,
+    batch_size: int = 64,
+) -> Method:
+    """Register ``func`` under ``name`` (the name used in specs and the CLI).
+
+    ``batch`` optionally designs many (instance, params) pairs in one call; see :class:`Method`.
+    """
     doc = inspect.getdoc(func) or ""
-    method = Method(name, func, summary or (doc.splitlines()[0] if doc else ""), label or name)
+    method = Method(name, func, summary or (doc.splitlines()[0] if doc else ""), label or name, batch, batch_size)
     _REGISTRY[name] = method
     return method
 
@@ -101,6 +132,8 @@ def methods() -> dict[str, Method]:
 register("lqr", baselines.lqr, label="LQR (centralized)")
 register("autonomous", baselines.autonomous, label="Autonomous (u = 0)")
 register("decentralized", baselines.decentralized, label="Decentralized (diagonal K)")
+register("sls", baselines.sls, label="SLS (delay constraints)")
+register("sls_topologies", baselines.sls_topologies, label="SLS (topology family)")
 register("sparse_admm", baselines.sparse_admm, label="Sparse K (l1 ADMM)")
 register("sparse_sdp", baselines.sparse_sdp, label="Sparse K (l1 SDP)")
 register("truncated_lqr", baselines.truncated_lqr, label="Truncated LQR K")

@@ -1,0 +1,297 @@
+"""Expanding a spec into runs and executing them into the store.
+
+Runs execute in worker processes (``concurrent.futures``), each limited to one
+BLAS/torch thread so that N workers use N cores; only this (client) process
+writes to the store, one transaction per finished run. Runs already in the
+store are skipped, so an interrupted sweep resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import time
+from collections import Counter
+from concurrent.futures import FIRST_COMPLETED, Executor, ProcessPoolExecutor, wait
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+
+from tqdm.auto import tqdm
+
+from codesign import Design, exact_cost, paper_instance, simulate, validation_set
+
+from .registry import get_method
+from .spec import ExperimentSpec, Run
+from .store import Store
+
+__all__ = [
+    "build_instance",
+    "execute_run",
+    "execute_task",
+    "plan_tasks",
+    "run_experiment",
+    "RunSummary",
+    "make_executor",
+    "open_executor",
+]
+
+_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+
+def build_instance(instance_spec: dict):
+    """The :class:`codesign.Instance` described by a run's instance spec."""
+    kwargs = dict(instance_spec)
+    family = kwargs.pop("family")
+    if family != "paper":
+        raise ValueError(f"unknown instance family {family!r}")
+    return paper_instance(**kwargs)
+
+
+def _noise_cost(instance, design: Design, evaluation) -> tuple[float, float]:
+    exact = exact_cost(instance, design.controller, noise_std=evaluation.noise_std)
+    if exact is not None:
+        return exact, 0.0
+    rollout = simulate(
+        instance,
+        design.controller,
+        validation_set(instance, evaluation.validation_size),
+        noise_std=evaluation.noise_std,
+        seed=instance.seed,
+    )
+    return rollout.cost, rollout.stderr
+
+
+def _score_noise(instance, designs: list[Design], evaluation) -> list[Design]:
+    if evaluation.noise_std <= 0:
+        return designs
+    scored = []
+    for design in designs:
+        if design.controller is not None and design.status in ("optimal", "inaccurate"):
+            cost, stderr = _noise_cost(instance, design, evaluation)
+            extras = dict(design.extras, noise_std=evaluation.noise_std, noise_cost=cost, noise_cost_stderr=stderr)
+            design = replace(design, extras=extras)
+        scored.append(design)
+    return scored
+
+
+def _failed(run: Run, exc: Exception) -> list[Design]:
+    return [Design.failure(run.method, run.params, "failed", f"{type(exc).__name__}: {exc}")]
+
+
+def execute_run(run: Run) -> tuple[list[Design], float]:
+    """Run one method on one instance; any exception becomes a ``failed`` design."""
+    start = time.perf_counter()
+    try:
+        instance = build_instance(run.instance)
+        designs = _score_noise(instance, get_method(run.method)(instance, **run.params), run.evaluation)
+    except Exception as exc:  # a failing method is a recorded status, never a crashed sweep
+        designs = _failed(run, exc)
+    return designs, time.perf_counter() - start
+
+
+def execute_task(runs: list[Run]) -> list[tuple[list[Design], float]]:
+    """Run a group of runs of one method; a batched method designs them in one call.
+
+    Returns ``(designs, seconds)`` per run, in order; the seconds of a batched call
+    are shared equally. If the batched call fails as a whole, each run is retried
+    alone so that one bad run cannot fail its neighbours.
+    """
+    method = get_method(runs[0].method)
+    if len(runs) == 1 or method.batch is None:
+        return [execute_run(run) for run in runs]
+    start = time.perf_counter()
+    try:
+        instances = [build_instance(run.instance) for run in runs]
+        results = method.run_batch([(inst, run.params) for inst, run in zip(instances, runs)])
+        results = [_score_noise(inst, designs, run.evaluation) for inst, designs, run in zip(instances, results, runs)]
+    except Exception:
+        return [execute_run(run) for run in runs]
+    share = (time.perf_counter() - start) / len(runs)
+    return [(designs, share) for designs in results]
+
+
+def plan_tasks(runs: list[Run]) -> list[list[Run]]:
+    """Group runs into tasks: batched methods get up to ``batch_size`` runs per task."""
+    tasks, groups = [], {}
+    for run in runs:
+        method = get_method(run.method)
+        if method.batch is None:
+            tasks.append([run])
+        else:
+            groups.setdefault(run.method, []).append(run)
+    for name, group in groups.items():
+        size = get_method(name).batch_size
+        tasks += [group[i:i + size] for i in range(0, len(group), size)]
+    # Largest tasks first keeps workers busy to the end.
+    return sorted(tasks, key=len, reverse=True)
+
+
+def _limit_threads() -> None:
+    for var in _THREAD_VARS:
+        os.environ[var] = "1"
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except ImportError:  # pragma: no cover
+        pass
+
+
+def make_executor(workers: int) -> Executor:
+    """A process pool of ``workers`` single-threaded workers (spawned, not forked)."""
+    # Children inherit the environment at spawn time, before numpy loads BLAS.
+    saved = {var: os.environ.get(var) for var in _THREAD_VARS}
+    for var in _THREAD_VARS:
+        os.environ[var] = "1"
+    try:
+        return ProcessPoolExecutor(
+            max_workers=workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_limit_threads,
+        )
+    finally:
+        for var, value in saved.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value
+
+
+class ExecutorError(ValueError):
+    """An executor address that cannot be used."""
+
+
+@contextmanager
+def open_executor(address: str, workers: int):
+    """An executor for ``address``, closed on exit.
+
+    ``"process"`` (the default) is a local pool of ``workers`` processes;
+    ``"dask-local"`` starts a local dask.distributed cluster of ``workers``
+    single-threaded worker processes; ``"dask://HOST:PORT"`` (or ``tcp://``)
+    connects to a running scheduler. Dask runs go through the client's
+    ``concurrent.futures`` interface; only this process writes to the store.
+    """
+    if address == "process":
+        pool = make_executor(workers)
+        try:
+            yield pool
+        finally:
+            pool.shutdown(wait=False, cancel_futures=True)
+        return
+    if address == "dask-local" or address.startswith(("dask://", "tcp://")):
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:  # pragma: no cover
+            raise ExecutorError("dask.distributed is not installed: pip install 'dask[distributed]'") from None
+        cluster = None
+        if address == "dask-local":
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40)
+            client = Client(cluster)
+        else:
+            target = "tcp://" + address.split("://", 1)[1]
+            try:
+                client = Client(target, timeout="10s")
+            except (OSError, TimeoutError) as exc:
+                raise ExecutorError(f"cannot reach the dask scheduler at {target}: {exc}") from None
+        try:
+            yield client.get_executor(pure=False)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        return
+    raise ExecutorError(
+        f"unknown executor {address!r}: use 'process', 'dask-local' or 'dask://HOST:PORT'"
+    )
+
+
+@dataclass
+class RunSummary:
+    """What a call of :func:`run_experiment` did."""
+
+    total: int
+    already_stored: int
+    computed: int = 0
+    statuses: Counter = field(default_factory=Counter)
+    seconds: float = 0.0
+
+    def __str__(self) -> str:
+        failed = {k: v for k, v in self.statuses.items() if k != "optimal"}
+        parts = [f"{self.total} runs: {self.computed} computed, {self.already_stored} already stored"]
+        if failed:
+            parts.append("non-optimal designs: " + ", ".join(f"{v} {k}" for k, v in sorted(failed.items())))
+        parts.append(f"{self.seconds:.1f} s")
+        return "; ".join(parts)
+
+
+def _drain(pool: Executor, tasks: list[list[Run]], record) -> None:
+    futures = {pool.submit(execute_task, task): task for task in tasks}
+    try:
+        remaining = set(futures)
+        while remaining:
+            finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
+            for future in finished:
+                for run, result in zip(futures[future], future.result()):
+                    record(run, *result)
+    except BaseException:
+        for future in futures:
+            future.cancel()
+        raise
+
+
+def run_experiment(
+    spec: ExperimentSpec,
+    store: Store,
+    *,
+    workers: int = 1,
+    executor: Executor | str | None = None,
+    progress: bool = True,
+) -> RunSummary:
+    """Execute every run of ``spec`` not yet in ``store``.
+
+    Parameters
+    ----------
+    spec : ExperimentSpec
+    store : Store
+        Finished runs are committed one by one as they complete.
+    workers : int
+        Worker processes; 1 runs everything in this process.
+    executor : concurrent.futures.Executor or str, optional
+        An executor to submit runs to, or an address for :func:`open_executor`
+        (``"process"``, ``"dask-local"``, ``"dask://HOST:PORT"``). By default a
+        local process pool of ``workers`` processes (none when ``workers == 1``).
+    progress : bool
+        Show a tqdm progress bar.
+    """
+    start = time.perf_counter()
+    runs = list({run.key: run for run in spec.runs()}.values())
+    done = store.done_keys()
+    pending = [run for run in runs if run.key not in done]
+    summary = RunSummary(total=len(runs), already_stored=len(runs) - len(pending))
+    store.set_meta(f"spec:{spec.name}", spec.source)
+    bar = tqdm(total=len(pending), desc=f"{spec.name}", unit="run", disable=not progress or not pending)
+
+    def record(run, designs, seconds):
+        store.add_run(run, designs, experiment=spec.name, seconds=seconds)
+        summary.computed += 1
+        summary.statuses.update(d.status for d in designs)
+        bar.update(1)
+
+    try:
+        if not pending:
+            pass
+        elif executor is None and workers <= 1:
+            for task in plan_tasks(pending):
+                for run, result in zip(task, execute_task(task)):
+                    record(run, *result)
+        elif isinstance(executor, Executor):
+            _drain(executor, plan_tasks(pending), record)
+        else:
+            with open_executor(executor or "process", workers) as pool:
+                _drain(pool, plan_tasks(pending), record)
+    finally:
+        bar.close()
+        summary.seconds = time.perf_counter() - start
+    return summary
+

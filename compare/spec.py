@@ -1,0 +1,323 @@
+"""Experiment specs: TOML files parsed into validated dataclasses.
+
+A spec names the instances (family, sizes, a_norms, seeds), the methods with
+their hyperparameters and grids, and evaluation settings. It expands into
+:class:`Run` objects, one per (instance, method entry, grid point)::
+
+    name = "quick"
+    description = "..."
+
+    [instances]
+    family = "paper"
+    n = [20]
+    a_norms = [0.995, 1.05]
+    seeds = 10                   # seeds 0..9, or an explicit list [0, 4, 7]
+
+    [evaluation]
+    validation_size = 1000
+    noise_std = 0.0
+
+    [[methods]]
+    method = "lqr"
+
+    [[methods]]
+    method = "decentralized"
+    label = "Decentralized"
+    params = { start = "lqr_diagonal" }
+    grid = { }                   # lists of values, expanded as a cartesian product
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import sys
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+from .registry import UnknownMethodError, get_method
+
+__all__ = [
+    "SpecError",
+    "InstanceSpec",
+    "MethodSpec",
+    "EvaluationSpec",
+    "ExperimentSpec",
+    "Run",
+    "load_spec",
+    "parse_spec",
+    "preset_names",
+]
+
+
+class SpecError(ValueError):
+    """A malformed experiment spec; the message names the offending key."""
+
+
+_FAMILY_KEYS = {"paper": {"family", "n", "a_norms", "seeds", "degree", "b_norm", "hops", "horizon"}}
+
+
+@dataclass(frozen=True)
+class InstanceSpec:
+    """Which instances to build: every (n, a_norm, seed) combination of the family."""
+
+    family: str = "paper"
+    n: tuple[int, ...] = (20,)
+    a_norms: tuple[float, ...] = (0.995,)
+    seeds: tuple[int, ...] = (0,)
+    degree: int = 6
+    b_norm: float = 1.0
+    hops: int = 3
+    horizon: int = 50
+
+    def expand(self) -> list[dict]:
+        """Keyword arguments of :func:`codesign.paper_instance` for every instance, with the seed."""
+        return [
+            {
+                "family": self.family,
+                "seed": seed,
+                "n": n,
+                "degree": self.degree,
+                "a_norm": a_norm,
+                "b_norm": self.b_norm,
+                "hops": self.hops,
+                "horizon": self.horizon,
+            }
+            for n in self.n
+            for a_norm in self.a_norms
+            for seed in self.seeds
+        ]
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """One ``[[methods]]`` entry: a registered method, its label, fixed params and grid."""
+
+    method: str
+    label: str
+    params: dict = field(default_factory=dict)
+    grid: dict = field(default_factory=dict)
+
+    def expand(self) -> list[dict]:
+        """Parameter dicts for every grid point (fixed params overlaid by grid values)."""
+        if not self.grid:
+            return [dict(self.params)]
+        keys = list(self.grid)
+        return [dict(self.params, **dict(zip(keys, values))) for values in itertools.product(*self.grid.values())]
+
+
+@dataclass(frozen=True)
+class EvaluationSpec:
+    """How designs are scored beyond their exact cost.
+
+    ``noise_std > 0`` adds a robustness score: each design's cost under process
+    noise ``w(t) ~ N(0, noise_std^2 I)`` (exact for static gains, simulated on
+    ``validation_size`` draws otherwise), stored in its extras as ``noise_cost``.
+    """
+
+    validation_size: int = 1000
+    noise_std: float = 0.0
+
+
+@dataclass(frozen=True)
+class Run:
+    """One unit of work: a method with fixed hyperparameters on one instance."""
+
+    instance: dict
+    method: str
+    label: str
+    params: dict
+    evaluation: EvaluationSpec
+    version: str
+
+    @property
+    def key(self) -> str:
+        """Content hash of (instance spec, method, hyperparameters, package version)."""
+        payload = {
+            "instance": self.instance,
+            "method": self.method,
+            "params": self.params,
+            "evaluation": {"noise_std": self.evaluation.noise_std, "validation_size": self.evaluation.validation_size},
+            "version": self.version,
+        }
+        text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+@dataclass(frozen=True)
+class ExperimentSpec:
+    """A parsed, validated experiment."""
+
+    name: str
+    description: str
+    instances: InstanceSpec
+    methods: tuple[MethodSpec, ...]
+    evaluation: EvaluationSpec
+    source: str = ""
+
+    def runs(self, version: str | None = None) -> list[Run]:
+        """Every run of the experiment, instance-major."""
+        if version is None:
+            from codesign import __version__ as version
+        return [
+            Run(instance, m.method, m.label, params, self.evaluation, version)
+            for instance in self.instances.expand()
+            for m in self.methods
+            for params in m.expand()
+        ]
+
+
+def preset_names() -> list[str]:
+    """Names of the presets shipped inside the package."""
+    folder = resources.files("compare") / "presets"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def load_spec(name_or_path: str | Path) -> ExperimentSpec:
+    """Load a preset by name (``"quick"``) or a spec from a TOML file path."""
+    text_path = Path(name_or_path)
+    if text_path.suffix == ".toml" or text_path.exists():
+        if not text_path.is_file():
+            raise SpecError(f"spec file not found: {text_path}")
+        text = text_path.read_text()
+        default_name = text_path.stem
+    else:
+        name = str(name_or_path)
+        if name not in preset_names():
+            raise SpecError(f"unknown preset {name!r}; presets: {', '.join(preset_names())} (or give a .toml file)")
+        text = (resources.files("compare") / "presets" / f"{name}.toml").read_text()
+        default_name = name
+    return parse_spec(text, default_name=default_name)
+
+
+def parse_spec(text: str, *, default_name: str = "experiment") -> ExperimentSpec:
+    """Parse and validate TOML text into an :class:`ExperimentSpec`."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"spec is not valid TOML: {exc}") from None
+    _check_keys("spec", data, {"name", "description", "instances", "methods", "evaluation"})
+    name = _typed("name", data.get("name", default_name), str)
+    description = _typed("description", data.get("description", ""), str)
+    if "instances" not in data:
+        raise SpecError("spec: missing [instances] table")
+    instances = _parse_instances(_typed("instances", data["instances"], dict))
+    evaluation = _parse_evaluation(_typed("evaluation", data.get("evaluation", {}), dict))
+    raw_methods = _typed("methods", data.get("methods", []), list)
+    if not raw_methods:
+        raise SpecError("methods: the spec needs at least one [[methods]] entry")
+    methods = tuple(_parse_method(i, entry) for i, entry in enumerate(raw_methods))
+    return ExperimentSpec(name, description, instances, methods, evaluation, text)
+
+
+def _check_keys(where: str, table: dict, allowed: set) -> None:
+    for key in table:
+        if key not in allowed:
+            raise SpecError(f"{where}.{key}: unknown key (allowed: {', '.join(sorted(allowed))})")
+
+
+def _typed(where: str, value, kind):
+    ok = isinstance(value, kind) and not (kind in (int, float) and isinstance(value, bool))
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if not ok:
+        kind_name = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
+        raise SpecError(f"{where}: expected {kind_name}, got {type(value).__name__} {value!r}")
+    return value
+
+
+def _list_of(where: str, value, kind, *, positive: bool = True) -> tuple:
+    items = value if isinstance(value, list) else [value]
+    if not items:
+        raise SpecError(f"{where}: must not be empty")
+    out = tuple(_typed(f"{where}[{i}]" if isinstance(value, list) else where, v, kind) for i, v in enumerate(items))
+    if positive and any(v <= 0 for v in out):
+        raise SpecError(f"{where}: values must be positive, got {list(out)}")
+    return out
+
+
+def _parse_instances(table: dict) -> InstanceSpec:
+    family = _typed("instances.family", table.get("family", "paper"), str)
+    if family not in _FAMILY_KEYS:
+        raise SpecError(f"instances.family: unknown family {family!r} (known: {', '.join(_FAMILY_KEYS)})")
+    _check_keys("instances", table, _FAMILY_KEYS[family])
+    seeds_value = table.get("seeds", 1)
+    if isinstance(seeds_value, int) and not isinstance(seeds_value, bool):
+        if seeds_value < 1:
+            raise SpecError(f"instances.seeds: a count must be >= 1, got {seeds_value}")
+        seeds = tuple(range(seeds_value))
+    else:
+        seeds = _list_of("instances.seeds", _typed("instances.seeds", seeds_value, list), int, positive=False)
+        if any(s < 0 for s in seeds):
+            raise SpecError(f"instances.seeds: seeds must be non-negative, got {list(seeds)}")
+        if len(set(seeds)) != len(seeds):
+            raise SpecError(f"instances.seeds: duplicate seeds in {list(seeds)}")
+    spec = InstanceSpec(
+        family=family,
+        n=_list_of("instances.n", table.get("n", [20]), int),
+        a_norms=_list_of("instances.a_norms", table.get("a_norms", [0.995]), float),
+        seeds=seeds,
+        degree=_typed("instances.degree", table.get("degree", 6), int),
+        b_norm=_typed("instances.b_norm", table.get("b_norm", 1.0), float),
+        hops=_typed("instances.hops", table.get("hops", 3), int),
+        horizon=_typed("instances.horizon", table.get("horizon", 50), int),
+    )
+    if any(n < 2 for n in spec.n):
+        raise SpecError(f"instances.n: sizes must be >= 2, got {list(spec.n)}")
+    if any(spec.degree > n for n in spec.n):
+        raise SpecError(f"instances.degree: {spec.degree} exceeds n = {min(spec.n)}")
+    for key in ("degree", "horizon"):
+        if getattr(spec, key) < 1:
+            raise SpecError(f"instances.{key}: must be >= 1, got {getattr(spec, key)}")
+    if spec.hops < 0:
+        raise SpecError(f"instances.hops: must be >= 0, got {spec.hops}")
+    if spec.b_norm <= 0:
+        raise SpecError(f"instances.b_norm: must be positive, got {spec.b_norm}")
+    return spec
+
+
+def _parse_evaluation(table: dict) -> EvaluationSpec:
+    _check_keys("evaluation", table, {"validation_size", "noise_std"})
+    size = _typed("evaluation.validation_size", table.get("validation_size", 1000), int)
+    noise = _typed("evaluation.noise_std", table.get("noise_std", 0.0), float)
+    if size < 2:
+        raise SpecError(f"evaluation.validation_size: must be >= 2, got {size}")
+    if noise < 0:
+        raise SpecError(f"evaluation.noise_std: must be >= 0, got {noise}")
+    return EvaluationSpec(size, noise)
+
+
+def _parse_method(index: int, entry) -> MethodSpec:
+    where = f"methods[{index}]"
+    entry = _typed(where, entry, dict)
+    _check_keys(where, entry, {"method", "label", "params", "grid"})
+    if "method" not in entry:
+        raise SpecError(f"{where}.method: missing (which registered method to run)")
+    name = _typed(f"{where}.method", entry["method"], str)
+    try:
+        method = get_method(name)
+    except UnknownMethodError as exc:
+        raise SpecError(f"{where}.method: {exc}") from None
+    label = _typed(f"{where}.label", entry.get("label", method.label), str)
+    params = _typed(f"{where}.params", entry.get("params", {}), dict)
+    grid = _typed(f"{where}.grid", entry.get("grid", {}), dict)
+    for key, values in grid.items():
+        if not isinstance(values, list) or not values:
+            raise SpecError(f"{where}.grid.{key}: expected a non-empty list of values, got {values!r}")
+        if key in params:
+            raise SpecError(f"{where}.grid.{key}: also set in params; set it in one place")
+    try:
+        method.check_params(params, f"{where}.params")
+        for key, values in grid.items():
+            for value in values:
+                method.check_params({key: value}, f"{where}.grid")
+    except ValueError as exc:
+        raise SpecError(str(exc)) from None
+    return MethodSpec(name, label, dict(params), dict(grid))

@@ -1,0 +1,190 @@
+"""The result store: one SQLite file, one row per run, keyed by content.
+
+Each finished run is written in a single transaction (its run row and all its
+designs), so a run killed mid-write leaves nothing behind and a rerun finds
+every completed run. Controllers are stored as ``.npz`` blobs (numpy arrays
+only, loaded with ``allow_pickle=False``), never as pickles.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+
+from codesign.controllers import controller_from_arrays
+
+__all__ = ["Store", "StoreError"]
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS runs (
+    run_key TEXT PRIMARY KEY,
+    experiment TEXT NOT NULL,
+    instance TEXT NOT NULL,
+    method TEXT NOT NULL,
+    label TEXT NOT NULL,
+    params TEXT NOT NULL,
+    version TEXT NOT NULL,
+    n_designs INTEGER NOT NULL,
+    seconds REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS designs (
+    run_key TEXT NOT NULL REFERENCES runs(run_key),
+    idx INTEGER NOT NULL,
+    method TEXT NOT NULL,
+    label TEXT NOT NULL,
+    params TEXT NOT NULL,
+    cost REAL,
+    cost_stderr REAL,
+    cost_kind TEXT,
+    links INTEGER,
+    self_loops INTEGER,
+    info_model TEXT,
+    status TEXT NOT NULL,
+    message TEXT,
+    seconds REAL,
+    controller_kind TEXT,
+    controller BLOB,
+    extras TEXT,
+    PRIMARY KEY (run_key, idx)
+);
+"""
+
+
+class StoreError(RuntimeError):
+    """The store file is unreadable or not a result store."""
+
+
+def _npz(arrays: dict) -> bytes:
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **{k: np.asarray(v) for k, v in arrays.items()})
+    return buffer.getvalue()
+
+
+def _float_or_none(value):
+    value = float(value)
+    return value if np.isfinite(value) else None
+
+
+class Store:
+    """A SQLite result store.
+
+    Parameters
+    ----------
+    path : str or Path
+        The database file; created (with its folder) if missing.
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._conn = sqlite3.connect(self.path, timeout=30)
+            self._conn.execute("PRAGMA journal_mode=DELETE")
+            self._conn.execute("PRAGMA synchronous=FULL")
+            self._conn.executescript(_SCHEMA)
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"{self.path} is not a usable result store: {exc}") from None
+
+    def close(self) -> None:
+        self._conn.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # -- writing ----------------------------------------------------------------
+    def set_meta(self, key: str, value) -> None:
+        with self._conn:
+            self._conn.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value, sort_keys=True)))
+
+    def add_run(self, run, designs, *, experiment: str, seconds: float) -> bool:
+        """Store a finished run and its designs atomically; False if it was already stored."""
+        rows = []
+        for idx, design in enumerate(designs):
+            record = design.to_record()
+            controller = design.controller
+            blob = _npz(controller.arrays()) if controller is not None and hasattr(controller, "arrays") else None
+            rows.append(
+                (
+                    run.key, idx, record["method"], run.label, record["params"],
+                    _float_or_none(record["cost"]), _float_or_none(record["cost_stderr"]), record["cost_kind"],
+                    record["links"], record["self_loops"], record["info_model"], record["status"],
+                    record["message"], record["seconds"], record["controller"], blob, record["extras"],
+                )
+            )
+        with self._conn:
+            cursor = self._conn.execute(
+                "INSERT OR IGNORE INTO runs VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (
+                    run.key, experiment, json.dumps(run.instance, sort_keys=True), run.method, run.label,
+                    json.dumps(run.params, sort_keys=True), run.version, len(rows), float(seconds),
+                ),
+            )
+            if cursor.rowcount == 0:
+                return False
+            self._conn.executemany(f"INSERT INTO designs VALUES ({', '.join('?' * 17)})", rows)
+        return True
+
+    # -- reading ----------------------------------------------------------------
+    def done_keys(self) -> set[str]:
+        return {row[0] for row in self._conn.execute("SELECT run_key FROM runs")}
+
+    def meta(self) -> dict:
+        return {k: json.loads(v) for k, v in self._conn.execute("SELECT key, value FROM meta")}
+
+    def __len__(self) -> int:
+        return self._conn.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
+
+    def records(self) -> list[dict]:
+        """Every stored design as a flat dict (JSON fields decoded, no controller)."""
+        query = """
+            SELECT d.run_key, d.idx, r.experiment, r.instance, d.method, d.label, d.params, d.cost,
+                   d.cost_stderr, d.cost_kind, d.links, d.self_loops, d.info_model, d.status, d.message,
+                   d.seconds, d.controller_kind, d.extras
+            FROM designs d JOIN runs r USING (run_key)
+            ORDER BY r.instance, d.label, d.run_key, d.idx
+        """
+        cols = [
+            "run_key", "idx", "experiment", "instance", "method", "label", "params", "cost", "cost_stderr",
+            "cost_kind", "links", "self_loops", "info_model", "status", "message", "seconds",
+            "controller_kind", "extras",
+        ]
+        out = []
+        for row in self._conn.execute(query):
+            record = dict(zip(cols, row))
+            for key in ("instance", "params", "extras"):
+                record[key] = json.loads(record[key]) if record[key] else {}
+            for key in ("cost", "cost_stderr"):
+                record[key] = float("nan") if record[key] is None else record[key]
+            out.append(record)
+        return out
+
+    def controller(self, run_key: str, idx: int = 0):
+        """Rebuild a stored controller (None if the design had none)."""
+        row = self._conn.execute(
+            "SELECT controller_kind, controller FROM designs WHERE run_key = ? AND idx = ?", (run_key, idx)
+        ).fetchone()
+        if row is None:
+            raise KeyError(f"no design ({run_key!r}, {idx}) in {self.path}")
+        kind, blob = row
+        if blob is None:
+            return None
+        with np.load(io.BytesIO(blob), allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+        return controller_from_arrays(kind, arrays)
+
+    def to_pandas(self):
+        """All records as a pandas DataFrame (pandas must be installed)."""
+        import pandas as pd
+
+        records = self.records()
+        for r in records:
+            r.update({f"instance.{k}": v for k, v in r["instance"].items()})
+        return pd.DataFrame.from_records(records)

@@ -1,0 +1,46 @@
+import sqlite3
+
+import pytest
+
+from compare import Store, parse_spec, run_experiment
+from compare.runner import ExecutorError, open_executor
+
+SPEC = """
+name = "dask"
+[instances]
+n = [8]
+a_norms = [0.995, 1.05]
+seeds = 3
+degree = 4
+horizon = 10
+[[methods]]
+method = "lqr"
+[[methods]]
+method = "decentralized"
+"""
+
+
+def _dump(path):
+    con = sqlite3.connect(path)
+    rows = con.execute("SELECT run_key, idx, cost, links, self_loops, status FROM designs ORDER BY run_key, idx").fetchall()
+    con.close()
+    return rows
+
+
+def test_dask_local_cluster_matches_local_executor(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    spec = parse_spec(SPEC)
+    with Store(tmp_path / "local.sqlite") as store:
+        run_experiment(spec, store, workers=1, progress=False)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with distributed.Client(cluster) as client, Store(tmp_path / "dask.sqlite") as store:
+            summary = run_experiment(spec, store, executor=client.get_executor(pure=False), progress=False)
+            assert summary.computed == 12
+    local, remote = _dump(tmp_path / "local.sqlite"), _dump(tmp_path / "dask.sqlite")
+    assert len(local) == 12 and local == remote
+
+
+def test_unknown_executor_is_a_clear_error(tmp_path):
+    with pytest.raises(ExecutorError, match="unknown executor 'spark'"):
+        with open_executor("spark", 2):
+            pass

@@ -1,0 +1,108 @@
+import networkx as nx
+import numpy as np
+import pytest
+
+from codesign import Instance, InstanceError, hop_distances, paper_instance
+
+
+@pytest.mark.parametrize("a_norm", [0.995, 1.05])
+@pytest.mark.parametrize("seed", [0, 7, 123])
+def test_paper_instance_matches_design(seed, a_norm):
+    inst = paper_instance(seed, a_norm=a_norm)
+    comm = inst.comm_adj
+    assert np.array_equal(comm, comm.T)
+    assert set(np.unique(comm)) <= {0.0, 1.0}
+    assert np.all(np.diag(comm) == 1)
+    assert nx.is_connected(nx.from_numpy_array(comm))
+    # each node's 6 nearest positions include itself: at least 5 neighbours
+    assert np.all(comm.sum(axis=1) - 1 >= 5)
+    far = hop_distances(comm) > 3
+    assert np.all(inst.A[far] == 0) and np.all(inst.B[far] == 0)
+    assert np.array_equal(inst.A, inst.A.T) and np.array_equal(inst.B, inst.B.T)
+    assert np.linalg.norm(inst.A, 2) == pytest.approx(a_norm, rel=1e-12)
+    assert np.linalg.norm(inst.B, 2) == pytest.approx(1.0, rel=1e-12)
+    assert inst.open_loop_radius == pytest.approx(a_norm, rel=1e-9)  # symmetric: norm = radius
+    # the plant graph is the support of A and B, inside the 3-hop closure
+    assert np.array_equal(inst.plant_adj != 0, (inst.A != 0) | (inst.B != 0))
+    assert not np.any((inst.plant_adj != 0) & far)
+    # DARE: P solves the Riccati equation
+    A, B, P = inst.A, inst.B, inst.P
+    residual = A.T @ P @ A - P - A.T @ P @ B @ np.linalg.solve(B.T @ P @ B + inst.R, B.T @ P @ A) + inst.Q
+    assert np.abs(residual).max() < 1e-9 * np.abs(P).max()
+
+
+def test_eigenvectors_shared_with_normalized_adjacency_before_truncation():
+    # With hops large enough nothing is cut, so A commutes with the graph shift operator.
+    inst = paper_instance(3, hops=100)
+    assert np.abs(inst.A @ inst.gso - inst.gso @ inst.A).max() < 1e-12
+    assert np.abs(inst.B @ inst.gso - inst.gso @ inst.B).max() < 1e-12
+
+
+def test_average_nonzeros_over_200_seeds():
+    counts = [paper_instance(seed).comm_adj.sum() for seed in range(200)]
+    assert 135 <= np.mean(counts) <= 145
+    plant = [paper_instance(seed).plant_adj.sum() - 20 for seed in range(0, 200, 10)]
+    assert 250 <= np.mean(plant) <= 310  # DESIGN.md §1: ~266-300 off-diagonal plant links
+
+
+def test_same_seed_same_instance_and_different_seeds_differ():
+    a, b, c = paper_instance(5), paper_instance(5), paper_instance(6)
+    assert np.array_equal(a.A, b.A) and np.array_equal(a.comm_adj, b.comm_adj)
+    assert not np.array_equal(a.A, c.A)
+    assert a.key == b.key != c.key
+
+
+def test_instance_arrays_are_read_only():
+    inst = paper_instance(0)
+    with pytest.raises(ValueError):
+        inst.A[0, 0] = 1.0
+
+
+def test_from_matrices_defaults_and_roundtrip():
+    inst0 = paper_instance(2)
+    inst = Instance.from_matrices(inst0.A, inst0.B, comm_adj=inst0.comm_adj)
+    assert np.allclose(inst.P, inst0.P)
+    assert np.array_equal(inst.comm_adj, inst0.comm_adj)
+    assert inst.spec["family"] == "matrices"
+    # default communication graph: the plant graph (with self-loops)
+    default = Instance.from_matrices(inst0.A, inst0.B)
+    assert np.array_equal(default.comm_adj != 0, (inst0.plant_adj != 0) | np.eye(20, dtype=bool))
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(A=np.ones((3, 2)), B=np.eye(3)), "A must be square"),
+        (dict(A=np.eye(3), B=np.eye(2)), "B must have shape"),
+        (dict(A=np.array([[np.nan, 0], [0, 1]]), B=np.eye(2)), "A has non-finite"),
+        (dict(A=np.eye(2), B=np.array([[np.inf, 0], [0, 1]])), "B has non-finite"),
+        (dict(A=np.eye(2), B=np.eye(2), Q=-np.eye(2)), "Q must be positive semidefinite"),
+        (dict(A=np.eye(2), B=np.eye(2), R=np.zeros((2, 2))), "R must be positive definite"),
+        (dict(A=np.eye(2), B=np.eye(2), Q=np.array([[1, 2], [0, 1]])), "Q must be symmetric"),
+        (dict(A=np.eye(2), B=np.eye(2), R=np.eye(3)), "R must have shape"),
+        (dict(A=np.diag([2.0, 0.5]), B=np.diag([0.0, 1.0])), "not stabilizable"),
+        (dict(A=np.eye(2), B=np.eye(2), horizon=0), "horizon"),
+        (dict(A=np.eye(2), B=np.eye(2), comm_adj=np.eye(3)), "comm_adj must have shape"),
+        (dict(A="abc", B=np.eye(2)), "A must be"),
+    ],
+)
+def test_from_matrices_rejects_bad_input(kwargs, match):
+    A = kwargs.pop("A")
+    B = kwargs.pop("B")
+    with pytest.raises(InstanceError, match=match):
+        Instance.from_matrices(A, B, **kwargs)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [(dict(n=1), "n must be"), (dict(degree=30), "degree"), (dict(a_norm=-1.0), "a_norm"),
+     (dict(a_norm=float("nan")), "a_norm"), (dict(horizon=0), "horizon")],
+)
+def test_paper_instance_rejects_bad_arguments(kwargs, match):
+    with pytest.raises(InstanceError, match=match):
+        paper_instance(0, **kwargs)
+
+
+def test_paper_instance_rejects_negative_seed():
+    with pytest.raises(InstanceError, match="seed"):
+        paper_instance(-1)

@@ -1,0 +1,46 @@
+import numpy as np
+
+from compare.report import aggregate, budget_costs, pareto_front, plant_links, plot_cost_vs_links
+
+INST = [{"family": "paper", "seed": s, "n": 8, "degree": 4, "a_norm": 1.05, "b_norm": 1.0, "hops": 3, "horizon": 10}
+        for s in range(3)]
+
+
+def _rec(inst, label, links, cost, status="optimal", params=None, info="instantaneous"):
+    return {"instance": inst, "label": label, "method": label, "params": params or {}, "links": links,
+            "self_loops": 8, "cost": cost, "status": status, "info_model": info, "run_key": "k", "idx": 0}
+
+
+def test_aggregate_medians_and_failures():
+    records = [_rec(INST[i], "m", 10 + i, 1.0 + i) for i in range(3)]
+    records.append(_rec(INST[0], "m", 99, float("nan"), status="infeasible", params={}))
+    (point,) = aggregate(records)
+    assert point.designs == 4 and point.ok == 3
+    assert point.links[1] == 11 and point.cost[1] == 2.0
+    assert point.statuses == {"optimal": 3, "infeasible": 1}
+
+
+def test_pareto_front_drops_dominated_settings():
+    records = []
+    for gamma, links, cost in ((1, 10, 2.0), (2, 20, 1.5), (3, 30, 1.6), (4, 40, 1.2)):
+        records += [_rec(inst, "m", links, cost, params={"gamma": gamma}) for inst in INST]
+    front = pareto_front(aggregate(records))
+    assert [p.links[1] for p in front] == [10, 20, 40]
+
+
+def test_budget_costs_take_best_design_within_budget_per_instance():
+    records = [_rec(INST[0], "m", 10, 3.0), _rec(INST[0], "m", 50, 2.0), _rec(INST[1], "m", 100, 1.5)]
+    ((panel, label), cells), = budget_costs(records, budgets=(20, 60, None)).items()
+    assert label == "m"
+    assert cells[0] == (3.0, 1) and cells[1] == (2.0, 1)
+    assert cells[2] == (1.75, 2)  # median of the per-instance bests 2.0 and 1.5
+
+
+def test_plant_boundary_and_plot_handles():
+    records = [_rec(inst, "m", 5, 1.2) for inst in INST]
+    boundary = plant_links(records)
+    (panel, links), = boundary.items()
+    assert 0 < links <= 8 * 7
+    fig, axes = plot_cost_vs_links(aggregate(records), boundaries=boundary)
+    assert len(axes) == 1 and axes[0].get_xscale() == "symlog"
+    assert np.isclose(axes[0].lines[-1].get_xdata()[0], links)

@@ -1,0 +1,110 @@
+import sqlite3
+
+import numpy as np
+import pytest
+
+from codesign import Design
+from compare import Store, StoreError, parse_spec, run_experiment
+
+SPEC = """
+name = "s"
+[instances]
+n = [8]
+a_norms = [1.05]
+seeds = 3
+degree = 4
+horizon = 10
+[[methods]]
+method = "lqr"
+[[methods]]
+method = "autonomous"
+[[methods]]
+method = "decentralized"
+"""
+
+
+def test_run_store_and_resume(tmp_path):
+    spec = parse_spec(SPEC)
+    with Store(tmp_path / "r.sqlite") as store:
+        summary = run_experiment(spec, store, progress=False)
+        assert (summary.computed, summary.already_stored) == (9, 0)
+        again = run_experiment(spec, store, progress=False)
+        assert (again.computed, again.already_stored) == (0, 9)
+        records = store.records()
+        assert len(records) == 9
+        lqr = [r for r in records if r["method"] == "lqr"]
+        assert all(r["cost"] == pytest.approx(1.0, abs=1e-9) for r in lqr)
+        # controllers come back as arrays, not pickles
+        controller = store.controller(lqr[0]["run_key"])
+        assert controller.K.shape == (8, 8)
+        assert "spec:s" in store.meta()
+
+
+def test_add_run_is_atomic_and_idempotent(tmp_path):
+    spec = parse_spec(SPEC)
+    run = spec.runs()[0]
+    design = Design("lqr", {}, None, 1.0, 56, 8, "instantaneous")
+    with Store(tmp_path / "r.sqlite") as store:
+        assert store.add_run(run, [design, design], experiment="s", seconds=0.1)
+        assert not store.add_run(run, [design], experiment="s", seconds=0.1)
+        assert len(store) == 1 and len(store.records()) == 2
+
+
+def test_failed_designs_store_nan_not_numbers(tmp_path):
+    spec = parse_spec(SPEC)
+    with Store(tmp_path / "r.sqlite") as store:
+        store.add_run(spec.runs()[1], [Design.failure("lqr", {}, "infeasible", "no")], experiment="s", seconds=0)
+        (record,) = store.records()
+        assert record["status"] == "infeasible" and np.isnan(record["cost"])
+
+
+def test_not_a_store(tmp_path):
+    bad = tmp_path / "bad.sqlite"
+    bad.write_bytes(b"this is not sqlite at all" * 100)
+    with pytest.raises(StoreError, match="not a usable result store"):
+        Store(bad)
+
+
+def test_noise_scenario_is_recorded(tmp_path):
+    spec = parse_spec(SPEC.replace("horizon = 10", "horizon = 10\n[evaluation]\nnoise_std = 0.5"))
+    with Store(tmp_path / "r.sqlite") as store:
+        run_experiment(spec, store, progress=False)
+        for r in store.records():
+            assert r["extras"]["noise_cost"] > r["cost"]
+
+
+def test_method_exception_becomes_failed_design(tmp_path, monkeypatch):
+    import compare.runner as runner
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("solver exploded")
+
+    monkeypatch.setattr(runner, "build_instance", boom)
+    with Store(tmp_path / "r.sqlite") as store:
+        summary = run_experiment(parse_spec(SPEC), store, progress=False)
+        assert summary.statuses["failed"] == 9
+        assert all("solver exploded" in r["message"] for r in store.records())
+
+
+def test_batched_methods_get_grouped_runs_and_store_per_run(tmp_path, monkeypatch):
+    import baselines
+    from compare import registry
+
+    calls = []
+
+    def batch(pairs):
+        calls.append(len(pairs))
+        return [baselines.decentralized(inst, **params) for inst, params in pairs]
+
+    monkeypatch.setitem(registry._REGISTRY, "decentralized_batched", registry.Method(
+        "decentralized_batched", baselines.decentralized, "test", "D", batch, 4))
+    spec = parse_spec(SPEC.replace('method = "decentralized"', 'method = "decentralized_batched"')
+                      .replace("seeds = 3", "seeds = 6"))
+    with Store(tmp_path / "b.sqlite") as store:
+        run_experiment(spec, store, progress=False)
+        batched = sorted(r["cost"] for r in store.records() if r["method"] == "decentralized")
+    assert sorted(calls) == [2, 4]
+    with Store(tmp_path / "p.sqlite") as store:
+        run_experiment(parse_spec(SPEC.replace("seeds = 3", "seeds = 6")), store, progress=False)
+        plain = sorted(r["cost"] for r in store.records() if r["method"] == "decentralized")
+    assert batched == plain and len(plain) == 6

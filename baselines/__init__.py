@@ -11,8 +11,8 @@ from .lqr import autonomous, decentralized, lqr
 from .polish import PolishResult, polish_gain
 from .qi import QIResult, is_quadratically_invariant
 from .sls import TOPOLOGY_FAMILY, SLSController, sls, sls_topologies, topology
-from .sparse_admm import admm_gamma_grid, sparse_admm
-from .sparse_sdp import SparseSDP, sparse_sdp
+from .sparse_admm import ADMM_GAMMAS, sparse_admm
+from .sparse_sdp import SDP_GAMMAS, SparseSDP, sparse_sdp
 from .truncation import truncated_lqr
 
 __all__ = [
@@ -29,8 +29,9 @@ __all__ = [
     "is_quadratically_invariant",
     "QIResult",
     "sparse_admm",
-    "admm_gamma_grid",
+    "ADMM_GAMMAS",
     "sparse_sdp",
     "SparseSDP",
+    "SDP_GAMMAS",
     "truncated_lqr",
 ]

@@ -148,7 +148,7 @@ def with_diagonal_end(designs: list, method: str, base: dict, decentral: "Decent
     if last is None or last.status not in ("optimal", "inaccurate") or last.links == 0 or diagonal is None:
         return designs
     params = {**base, "gamma": float("inf")}
-    return designs + [as_path_point(diagonal, method, params, {"decentralized": True})]
+    return designs + [as_path_point(diagonal, method, params, {"solver": "decentralized", "decentralized": True})]
 
 
 class DecentralizedCache:

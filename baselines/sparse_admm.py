@@ -2,11 +2,14 @@
 
 For each weight γ on an increasing grid, minimize
 
-    J(K) + γ Σ_{i≠j} w_ij |K_ij|,   J(K) = trace(P_K),   P_K = A_cl' P_K A_cl + Q + K'RK,
+    J(K) / trace(P) + γ Σ_{i≠j} w_ij |K_ij|,   J(K) = trace(P_K),   P_K = A_cl' P_K A_cl + Q + K'RK,
 
 over static gains (A_cl = A + BK here: this module uses the evaluator's sign,
 ``u = K x``, where DESIGN.md §5 writes ``u = -Kx``; the ℓ1 term does not care and
 the gradient below carries the sign). x(0) ~ N(0, I) plays the role of B₁B₁'.
+γ is in units of the normalized cost (DESIGN.md's γ is this γ times trace(P),
+the LQR cost): one grid then suits every instance of the family, and a path's
+points line up across instances in a report.
 ADMM splits K = G:
 
 - K-step: minimize J(K) + (ρ/2)‖K − U‖²_F, U = G − Λ/ρ, by Anderson–Moore
@@ -35,7 +38,11 @@ from codesign.evaluation import spectral_radius
 from ._common import Timer
 from ._sparse import DecentralizedCache, as_path_point, check_gammas, design_on_pattern, with_diagonal_end
 
-__all__ = ["sparse_admm", "admm_gamma_grid", "admm_gamma_max"]
+__all__ = ["sparse_admm", "ADMM_GAMMAS", "admm_gamma_max"]
+
+#: Default weights (normalized units): from an (almost) dense LQR gain to a few links
+#: on the paper's family; the path is closed by the diagonal gain at γ = inf.
+ADMM_GAMMAS = tuple(float(g) for g in np.geomspace(1e-6, 0.1, 10))
 
 _ARMIJO = 1e-4        # sufficient-decrease constant of the line search
 _BACKTRACK = 0.5
@@ -137,12 +144,13 @@ def _offdiag_ones(n):
 
 
 def admm_gamma_max(instance) -> float:
-    """Smallest γ at which the best diagonal gain is a stationary point of the ℓ1 problem.
+    """Smallest γ (normalized units) at which the best diagonal gain is stationary for plain ℓ1.
 
     At a diagonal K_d optimal over the diagonal, the subgradient condition of
-    J(K) + γ Σ_{i≠j} |K_ij| holds exactly when γ ≥ max_{i≠j} |∇J(K_d)_ij|. K_d is
-    the decentralized gain of the benchmark (finite-horizon) cost, a close stand-in
-    for the infinite-horizon one.
+    J(K)/trace(P) + γ Σ_{i≠j} |K_ij| holds exactly when
+    γ ≥ max_{i≠j} |∇J(K_d)_ij| / trace(P). K_d is the decentralized gain of the
+    benchmark (finite-horizon) cost, a close stand-in for the infinite-horizon one.
+    Reweighting makes paths diagonal well below this value.
     """
     diagonal = DecentralizedCache(instance).usable()
     point = None if diagonal is None else _evaluate(instance, np.array(diagonal.controller.K))
@@ -150,20 +158,7 @@ def admm_gamma_max(instance) -> float:
         raise ValueError("no stabilizing diagonal gain on this instance")
     grad = point.grad.copy()
     np.fill_diagonal(grad, 0.0)
-    return float(np.max(np.abs(grad)))
-
-
-def admm_gamma_grid(instance, num: int = 10, *, decades: float = 5.0) -> list[float]:
-    """Default weights: ``num`` log-spaced values ending a little above :func:`admm_gamma_max`.
-
-    The low end, ``decades`` below, leaves the LQR gain (nearly) dense. Without a
-    stabilizing diagonal gain the grid ends at trace(P) instead.
-    """
-    try:
-        top = 1.2 * admm_gamma_max(instance)
-    except ValueError:
-        top = instance.trace_P
-    return [float(g) for g in np.geomspace(top * 10.0 ** (-decades), top, int(num))]
+    return float(np.max(np.abs(grad))) / instance.trace_P
 
 
 def sparse_admm(
@@ -186,8 +181,8 @@ def sparse_admm(
     ----------
     instance : Instance
     gammas : list of float, optional
-        Sparsity weights (same units as trace(P)); sorted increasing. Default:
-        :func:`admm_gamma_grid` (10 values up to where the gain is diagonal).
+        Sparsity weights in units of the normalized cost; sorted increasing.
+        Default: :data:`ADMM_GAMMAS` (10 values, 1e-6 to 0.1).
     reweight : int
         Weighted ℓ1 solves per γ (lqrsp's ``reweightedIter``); after each,
         ``w_ij = 1/(|G_ij| + eps_weight)``, stopping early once the weights settle.
@@ -226,7 +221,7 @@ def sparse_admm(
         stabilizing (n, n) gain.
     """
     n = instance.n
-    gammas = check_gammas(admm_gamma_grid(instance) if gammas is None else gammas)
+    gammas = check_gammas(ADMM_GAMMAS if gammas is None else gammas)
     for label, value in (("rho", rho), ("eps_weight", eps_weight), ("tol", tol), ("kstep_tol", kstep_tol)):
         if not (np.isfinite(value) and value > 0):
             raise ValueError(f"{label} must be a positive number, got {value!r}")
@@ -245,6 +240,7 @@ def sparse_admm(
         )
 
     base = {"reweight": int(reweight), "rho": float(rho)}
+    scale = instance.trace_P  # the ADMM itself runs on trace(P_K), as in lqrsp
     decentral = DecentralizedCache(instance)
     point, G, Lam = start_point, K.copy(), np.zeros((n, n))
     # Weights carry along the path as in lqrsp: an entry zeroed at one γ starts the
@@ -258,7 +254,7 @@ def sparse_admm(
             admm_iters = kstep_iters = rounds = 0
             converged = True
             for rounds in range(1, reweight + 1):
-                point, G, Lam, its, kits, ok = _admm(instance, point, G, Lam, gamma * W / rho, rho,
+                point, G, Lam, its, kits, ok = _admm(instance, point, G, Lam, scale * gamma * W / rho, rho,
                                                  tol=tol, kstep_tol=kstep_tol, maxiter=maxiter)
                 admm_iters += its
                 kstep_iters += kits

@@ -3,11 +3,13 @@
 With ``u = -K x`` (DESIGN.md §5; the designs returned here store the evaluator's
 ``u = K x``, i.e. the negated gain) and ``K = Y X⁻¹``:
 
-    minimize    tr(QX) + tr(R Y X⁻¹ Y') + γ Σ_{i≠j} |Y_ij|
+    minimize    [tr(QX) + tr(R Y X⁻¹ Y')] / trace(P) + γ Σ_{i≠j} |Y_ij|
     subject to  [[X − I, AX − BY], [(AX − BY)', X]] ⪰ 0,   X = diag(x).
 
 The LMI is A_cl X A_cl' + I ⪯ X, so X bounds the closed-loop covariance sum and
-the objective bounds trace(P_K) from above; every solution stabilizes. X is
+the bracket bounds trace(P_K) from above; every solution stabilizes. γ is in
+units of the normalized cost, as in :mod:`baselines.sparse_admm` (DESIGN.md's γ
+is this one times trace(P), the LQR cost). X is
 diagonal so that the pattern of Y is the pattern of K (with X full a sparse Y
 gives a dense K); the price is that the bound is loose, so J(K) is always
 re-evaluated exactly. With X diagonal, tr(R Y X⁻¹ Y') = Σ_j ‖R^{½} Y e_j‖² / x_j
@@ -31,7 +33,11 @@ from codesign.design import Design
 from ._common import Timer
 from ._sparse import DecentralizedCache, check_gammas, design_on_pattern, with_diagonal_end
 
-__all__ = ["sparse_sdp", "SparseSDP", "sdp_gamma_grid"]
+__all__ = ["sparse_sdp", "SparseSDP", "SDP_GAMMAS"]
+
+#: Default weights (normalized units): from an (almost) dense gain to a few links on
+#: the paper's family; the path is closed by the diagonal gain at γ = inf.
+SDP_GAMMAS = tuple(float(g) for g in np.geomspace(1e-4, 1.0, 10))
 
 #: cvxpy statuses and the design status each maps to (anything else is "failed").
 _STATUS = {
@@ -85,19 +91,19 @@ class SparseSDP:
             + self.gamma * cp.sum(cp.abs(cp.multiply(off, self.Y)))
         )
         self.problem = cp.Problem(cp.Minimize(objective), [self.lmi])
-        #: The solve behind :meth:`gamma_max`: the solution for every γ >= gamma_max.
-        self.diagonal_result = None
 
     def solve(self, gamma: float) -> dict:
         """Solve at weight ``gamma``.
 
         Returns a dict with ``status`` (a :class:`Design` status), ``cvxpy_status``,
-        ``K`` (``u = K x``, None without a solution), ``Y``, ``x``, ``objective``
-        (the upper bound on trace(P_K)), ``solve_time``, ``iterations`` and ``message``.
+        ``K`` (``u = K x``, None without a solution), ``Y``, ``x``, ``bound``
+        (tr(QX) + tr(RYX⁻¹Y'), an upper bound on trace(P_K)), ``solve_time``,
+        ``iterations`` and ``message``.
         """
         cp = self._cp
-        self.gamma.value = float(gamma)
-        out = {"K": None, "Y": None, "x": None, "objective": float("nan"), "solve_time": float("nan"),
+        # The smooth part is left unnormalized; scaling γ instead keeps the data as is.
+        self.gamma.value = float(gamma) * self.instance.trace_P
+        out = {"K": None, "Y": None, "x": None, "bound": float("nan"), "solve_time": float("nan"),
                "iterations": -1, "message": ""}
         options = {**_CLARABEL_OPTIONS, "max_iter": int(self.max_iter)}
         try:
@@ -119,33 +125,28 @@ class SparseSDP:
             out["message"] = f"SDP solver status {raw}"
         if out["status"] in ("optimal", "inaccurate") and self.Y.value is not None:
             x, Y = np.array(self.x.value), np.array(self.Y.value)
-            out.update(x=x, Y=Y, K=-Y / x[None, :], objective=float(self.problem.value))
+            RY = np.linalg.cholesky(self.instance.R).T @ Y
+            bound = float(np.diag(self.instance.Q) @ x + np.sum(RY**2 / x[None, :]))
+            out.update(x=x, Y=Y, K=-Y / x[None, :], bound=bound)
         elif out["status"] in ("optimal", "inaccurate"):
             out.update(status="failed", message=f"SDP solver status {raw} without a solution")
         return out
 
     def gamma_max(self, *, scale: float = 1e6) -> float:
-        """Smallest γ at which the solution is diagonal (the problem is convex, so this is exact).
+        """Smallest γ (normalized units) at which the solution is diagonal; exact, the problem is convex.
 
         Solves once with a weight large enough to force Y diagonal and reads the
         off-diagonal gradient of the Lagrangian there: 2 R Y X⁻¹ (objective) plus
         2 B' Z₁₂ (LMI dual Z); the diagonal point stays optimal while γ bounds it.
         """
-        result = self.solve(scale * self.instance.trace_P)
-        self.diagonal_result = result
+        result = self.solve(scale)
         if result["status"] != "optimal":
             raise RuntimeError(f"could not solve the diagonal SDP: {result['message']}")
         n = self.instance.n
         Z = np.asarray(self.lmi.dual_value)
         grad = 2.0 * self.instance.R @ result["Y"] / result["x"][None, :] + 2.0 * self.instance.B.T @ Z[:n, n:]
         np.fill_diagonal(grad, 0.0)
-        return float(np.max(np.abs(grad)))
-
-
-def sdp_gamma_grid(sdp: SparseSDP, num: int = 10, *, decades: float = 4.0) -> list[float]:
-    """``num`` log-spaced weights ending a little above :meth:`SparseSDP.gamma_max`."""
-    top = 1.2 * sdp.gamma_max()
-    return [float(g) for g in np.geomspace(top * 10.0 ** (-decades), top, int(num))]
+        return float(np.max(np.abs(grad))) / self.instance.trace_P
 
 
 def sparse_sdp(
@@ -163,10 +164,8 @@ def sparse_sdp(
     ----------
     instance : Instance
     gammas : list of float, optional
-        Sparsity weights (units of trace(P)); sorted increasing. Default: 10
-        log-spaced values over four decades, the largest 1.2 times the weight
-        at which Y becomes diagonal (:meth:`SparseSDP.gamma_max`, whose solve
-        serves as that last point).
+        Sparsity weights in units of the normalized cost; sorted increasing.
+        Default: :data:`SDP_GAMMAS` (10 values, 1e-4 to 1).
     polish : bool
         Re-optimize the free entries of each pattern on the exact benchmark cost.
     threshold : float
@@ -190,31 +189,18 @@ def sparse_sdp(
         raise ValueError(f"threshold must be in [0, 1), got {threshold!r}")
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
         raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
-    if gammas is not None:
-        gammas = check_gammas(gammas)
+    gammas = check_gammas(SDP_GAMMAS if gammas is None else gammas)
     with Timer() as compile_timer:
         sdp = SparseSDP(instance, max_iter=max_iter)
-    reuse = None
-    if gammas is None:
-        try:
-            gammas = check_gammas(sdp_gamma_grid(sdp))
-            # Past gamma_max the solution no longer depends on γ: the top point is
-            # the solve that found gamma_max.
-            reuse = (gammas[-1], sdp.diagonal_result)
-        except RuntimeError as exc:
-            # No default grid without a solvable diagonal problem: report it on the
-            # whole path rather than crash a sweep.
-            return [Design.failure("sparse_sdp", {"gamma": None, "threshold": float(threshold)}, "infeasible",
-                                   str(exc), info_model="instantaneous", seconds=compile_timer.seconds)]
     decentral = DecentralizedCache(instance)
     designs = []
     for gamma in gammas:
         params = {"gamma": float(gamma), "threshold": float(threshold)}
         with Timer() as timer:
-            result = reuse[1] if reuse is not None and gamma == reuse[0] else sdp.solve(gamma)
+            result = sdp.solve(gamma)
             extras = {"solver": "CLARABEL", "solver_status": result["cvxpy_status"],
                       "solve_time": result["solve_time"], "iterations": result["iterations"],
-                      "sdp_bound": result["objective"] / instance.trace_P}
+                      "sdp_bound": result["bound"] / instance.trace_P}
             if result["K"] is None:
                 design = Design.failure("sparse_sdp", params, result["status"], result["message"],
                                         info_model="instantaneous", extras=extras)

@@ -91,25 +91,42 @@ def test_every_point_is_exact_stable_and_polished(instance, paths, name):
 def test_extras_record_the_solver(paths):
     for design in paths["sparse_sdp"]:
         extras = design.extras
+        if design.params["gamma"] == float("inf"):
+            assert extras["decentralized"] and design.links == 0
+            continue
         assert extras["solver"] == "CLARABEL"
         assert extras["solver_status"] == "optimal"
         assert extras["iterations"] > 0 and extras["solve_time"] > 0
         # The diagonal-X SDP bounds the infinite-horizon cost of K = Y X^-1 from above.
         assert extras["sdp_bound"] >= 1.0
     for design in paths["sparse_admm"]:
-        assert design.extras["solver"] == "admm"
-        assert design.extras["admm_iterations"] > 0
         assert design.params["rho"] == 100.0 and design.params["reweight"] == 3
+        if design.params["gamma"] < float("inf"):
+            assert design.extras["solver"] == "admm"
+            assert design.extras["admm_iterations"] > 0
 
 
-def test_admm_matches_or_beats_truncated_lqr(instance, paths):
-    admm = _front(paths["sparse_admm"])
+#: "Matches": the ADMM front may exceed truncation by this relative amount. On the
+#: dense end both polish near-identical patterns to costs that differ in the 6th
+#: digit (worst seen on seeds 0-9, both a_norms: 9e-5 relative, at 28 links).
+MATCH_RTOL = 1e-4
+
+
+def _check_admm_front_against_truncation(instance, admm_designs):
+    admm = _front(admm_designs)
     counts = sorted({links for links, _ in admm})
     truncated = {d.params["links"]: d for d in truncated_lqr(instance, links=counts)}
+    strictly_better = 0
     for count in counts:
         best_admm = min(cost for links, cost in admm if links <= count)
         assert truncated[count].status == "optimal"
-        assert best_admm <= truncated[count].cost * (1 + 1e-9), (count, best_admm, truncated[count].cost)
+        assert best_admm <= truncated[count].cost * (1 + MATCH_RTOL), (count, best_admm, truncated[count].cost)
+        strictly_better += best_admm < truncated[count].cost * (1 - MATCH_RTOL)
+    return strictly_better
+
+
+def test_admm_matches_or_beats_truncated_lqr(instance, paths):
+    _check_admm_front_against_truncation(instance, paths["sparse_admm"])
 
 
 def test_admm_gamma_max_gives_the_diagonal_gain():
@@ -141,7 +158,7 @@ def test_sdp_gain_is_y_over_x_with_evaluator_sign():
     assert np.linalg.eigvalsh(X - Acl @ X @ Acl.T - np.eye(inst.n)).min() > -1e-6
     # X bounds the covariance sum L, so the SDP objective bounds trace(P_K) from above.
     P_K = scipy.linalg.solve_discrete_lyapunov(Acl.T, inst.Q + K.T @ inst.R @ K)
-    assert result["objective"] >= np.trace(P_K) * (1 - 1e-7)
+    assert result["bound"] >= np.trace(P_K) * (1 - 1e-7)
     assert spectral_radius(Acl) < 1
 
 
@@ -199,11 +216,14 @@ def test_infeasible_sdp_is_a_recorded_status():
     assert all(np.isnan(d.cost) and d.controller is None for d in designs)
     assert all(d.extras["solver_status"] == "infeasible" for d in designs)
     assert [d.params["gamma"] for d in designs] == [0.1, 1.0]
-    # Without a grid the default one cannot be built either: still a status, not a crash.
-    (default,) = sparse_sdp(inst)
-    assert default.status == "infeasible" and "diagonal" in default.message
+    # The default grid: every point recorded as infeasible, and no diagonal end is
+    # added to a path that never produced a gain.
+    default = sparse_sdp(inst)
+    assert len(default) == 10 and all(d.status == "infeasible" for d in default)
+    with pytest.raises(RuntimeError, match="diagonal SDP"):
+        SparseSDP(inst).gamma_max()
     # The ADMM needs no diagonal certificate and designs stabilizing gains here.
-    assert all(d.status == "optimal" for d in sparse_admm(inst, gammas=[0.01, 1.0]))
+    assert all(d.status == "optimal" for d in sparse_admm(inst, gammas=[1e-3, 1.0]))
 
 
 def test_sdp_iteration_limit_is_a_recorded_failure():
@@ -216,7 +236,7 @@ def test_sdp_iteration_limit_is_a_recorded_failure():
 
 def test_unpolished_points_are_exact_too():
     inst = paper_instance(1, n=8)
-    designs = sparse_admm(inst, gammas=[0.01, 0.1], polish=False, diagonal_end=False)
+    designs = sparse_admm(inst, gammas=[1e-4, 1e-3], polish=False, diagonal_end=False)
     assert len(designs) == 2
     for design in designs:
         assert design.cost == static_gain_cost(inst, design.controller.K)
@@ -249,6 +269,14 @@ def test_registry_and_preset():
     assert {"gammas", "polish", "threshold"} <= set(get_method("sparse_sdp").hyperparameters)
     with pytest.raises(ValueError, match="rho"):
         admm.check_params({"rho": "big"})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("a_norm", A_NORMS)
+@pytest.mark.parametrize("seed", range(1, 10))
+def test_paper_scale_admm_front_against_truncation(seed, a_norm):
+    inst = paper_instance(seed, a_norm=a_norm)
+    _check_admm_front_against_truncation(inst, sparse_admm(inst))
 
 
 @pytest.mark.slow

@@ -138,14 +138,15 @@ def design_on_pattern(instance, method: str, params: dict, K, *, extras: dict, p
 
 
 def with_diagonal_end(designs: list, method: str, base: dict, decentral: "DecentralizedCache") -> list:
-    """Close a path at γ → ∞ with the decentralized gain if its last point still has links.
+    """Close a path at γ → ∞ with the decentralized gain (``params["gamma"] = inf``).
 
-    The extra point has ``params["gamma"] = inf``; a path whose last point is not
-    usable (an infeasible SDP, say) is left as it is.
+    Every path gets this point, even one already diagonal at its largest γ, so that
+    reports aggregating a γ over instances see the same points for every instance.
+    A path with no usable design (an infeasible SDP, say) is left as it is: its
+    γ → ∞ limit is just as infeasible.
     """
-    last = designs[-1] if designs else None
     diagonal = decentral.usable()
-    if last is None or last.status not in ("optimal", "inaccurate") or last.links == 0 or diagonal is None:
+    if diagonal is None or not any(d.status in ("optimal", "inaccurate") for d in designs):
         return designs
     params = {**base, "gamma": float("inf")}
     return designs + [as_path_point(diagonal, method, params, {"solver": "decentralized", "decentralized": True})]

@@ -204,15 +204,18 @@ def sparse_admm(
     start : array_like, shape (n, n), optional
         Stabilizing gain (``u = K x``) to start the path from; LQR by default.
     diagonal_end : bool
-        If the largest γ still leaves links, close the path with the decentralized
-        gain as its γ → ∞ point (``params["gamma"] = inf``).
+        Close the path with the decentralized gain as its γ → ∞ point
+        (``params["gamma"] = inf``).
 
     Returns
     -------
     list of Design
-        One per γ (``params = {"gamma": γ, "reweight": ..., "rho": ...}``), each
-        with its own links and exact cost, information model ``instantaneous``.
-        Patterns with no off-diagonal entry are the decentralized gain.
+        One per γ (``params = {"gamma": γ, "reweight": ..., "rho": ...}``), then
+        the γ = inf end, each with its own links and exact finite-horizon cost,
+        information model ``instantaneous``. Patterns with no off-diagonal entry
+        are the decentralized gain. Extras record the ADMM and K-step iterations,
+        reweighting rounds, convergence, the polishing, the spectral radius and
+        whether the previous γ's gain was kept (``fallback``).
 
     Raises
     ------

@@ -174,16 +174,18 @@ def sparse_sdp(
         Clarabel's iteration limit; a solve that hits it is a ``failed`` design
         (cvxpy status ``user_limit``).
     diagonal_end : bool
-        If the largest γ still leaves links, close the path with the decentralized
-        gain as its γ → ∞ point (``params["gamma"] = inf``).
+        Close the path with the decentralized gain as its γ → ∞ point
+        (``params["gamma"] = inf``).
 
     Returns
     -------
     list of Design
-        One per γ (``params = {"gamma": γ, "threshold": ...}``), information model
-        ``instantaneous``; extras record the solver, its status, solve time and
-        iterations. A γ whose SDP is infeasible or fails is a design with that
-        status, never an exception. Diagonal patterns are the decentralized gain.
+        One per γ (``params = {"gamma": γ, "threshold": ...}``), then the γ = inf
+        end, information model ``instantaneous``; extras record the solver, its
+        status, solve time, iterations and the SDP's bound on the normalized
+        infinite-horizon cost. A γ whose SDP is infeasible or fails is a design
+        with that status, never an exception. Diagonal patterns are the
+        decentralized gain.
     """
     if not (np.isfinite(threshold) and 0 <= threshold < 1):
         raise ValueError(f"threshold must be in [0, 1), got {threshold!r}")

@@ -292,3 +292,37 @@ def test_paper_scale_paths(seed, a_norm):
         costs = [d.cost for d in designs]
         assert all(b <= a for a, b in zip(links, links[1:])), (name, links)
         assert all(b >= a - 1e-12 for a, b in zip(costs, costs[1:])), (name, costs)
+
+
+def test_admm_keeps_the_previous_gain_when_a_gamma_fails(monkeypatch):
+    import importlib
+
+    from codesign.design import Design
+
+    # `baselines.sparse_admm` is the function; the module is reached by its full name.
+    admm_module = importlib.import_module("baselines.sparse_admm")
+
+    inst = paper_instance(1, n=8)
+    real = admm_module.design_on_pattern
+    calls = []
+
+    def failing_second(instance, method, params, K, **kwargs):
+        calls.append(params["gamma"])
+        if len(calls) == 2:  # as if polishing had left a destabilizing gain
+            return Design.failure(method, params, "diverged", "gain does not stabilize",
+                                  info_model="instantaneous")
+        return real(instance, method, params, K, **kwargs)
+
+    monkeypatch.setattr(admm_module, "design_on_pattern", failing_second)
+    first, second, third = sparse_admm(inst, gammas=[1e-4, 1e-3, 1e-2], diagonal_end=False)
+    assert second.status == "optimal" and second.extras["fallback"]
+    assert "previous gamma" in second.message and second.params["gamma"] == 1e-3
+    assert (second.links, second.cost) == (first.links, first.cost)
+    assert not third.extras["fallback"] and third.status == "optimal"
+
+    calls.clear()
+    monkeypatch.setattr(admm_module, "design_on_pattern",
+                        lambda instance, method, params, K, **kw: Design.failure(
+                            method, params, "diverged", "gain does not stabilize", info_model="instantaneous"))
+    (only,) = sparse_admm(inst, gammas=[1e-4])
+    assert only.status == "diverged" and np.isnan(only.cost)

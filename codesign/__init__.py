@@ -4,6 +4,7 @@ Public names::
 
     from codesign import paper_instance, Instance, Design
     from codesign import static_gain_cost, simulate, validation_set
+    from codesign import grnn, grnn_batch, GRNNController
 """
 
 from .controllers import StaticGain, ZeroInput, controller_from_arrays, register_controller
@@ -19,6 +20,7 @@ from .evaluation import (
     static_gain_cost_and_grad,
     validation_set,
 )
+from .grnn import GRNNController, grnn, grnn_batch, grnn_defaults, grnn_method, paper_beta
 from .instances import Instance, InstanceError, hop_distances, paper_instance
 
 __version__ = "0.1.0"
@@ -45,4 +47,10 @@ __all__ = [
     "exact_cost",
     "compare_exact_and_simulated",
     "spectral_radius",
+    "GRNNController",
+    "grnn",
+    "grnn_batch",
+    "grnn_method",
+    "grnn_defaults",
+    "paper_beta",
 ]

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import baselines
+import codesign
 
 __all__ = ["Method", "register", "get_method", "methods", "UnknownMethodError"]
 
@@ -137,3 +138,8 @@ register("sls_topologies", baselines.sls_topologies, label="SLS (topology family
 register("sparse_admm", baselines.sparse_admm, label="Sparse K (l1 ADMM)")
 register("sparse_sdp", baselines.sparse_sdp, label="Sparse K (l1 SDP)")
 register("truncated_lqr", baselines.truncated_lqr, label="Truncated LQR K")
+for _name, _variant, _label in (("grnn", "given", "GRNN"), ("grnn_dense", "dense", "GRNN-Dense"),
+                                 ("grnn_fixed", "fixed", "GRNN-Fixed"), ("grnn_sparse", "sparse", "GRNN-Sparse")):
+    _func = codesign.grnn_method(_variant)
+    register(_name, _func, label=_label, batch=_func.batch, batch_size=25)
+register("gcnn", baselines.gcnn, label="GCNN", batch=baselines.gcnn.batch, batch_size=25)

@@ -1,0 +1,438 @@
+"""The GCNN baseline of Gama & Sojoudi (2021), as the paper benchmarked it (DESIGN.md Sec. 4).
+
+Memoryless: one graph-filter layer with K = 5 taps and 32 features, tanh, and a
+per-node linear readout, no bias:
+
+    z_f(t) = sum_{k=0}^{4} h_{f,k} S^k x(t),   u_i(t) = sum_f w_f tanh(z_{f,i}(t)),
+
+5 * 32 + 32 = 192 parameters, S the given normalized adjacency. ``S^k x(t)`` is
+used with no delay: the controller assumes instantaneous multi-hop communication.
+
+Training (paper code): Adam, learning rate 0.01 multiplied by 0.9 every 10
+updates, coupled weight decay 2, no clipping, loss = mean raw J per batch.
+Models are trained in stacks with autograd (the model is memoryless, so the
+graph is short) and :class:`codesign.training.BatchedAdam`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from codesign.controllers import register_controller
+from codesign.design import Design, count_links
+from codesign.evaluation import simulate, spectral_radius, validation_set
+from codesign.training import DTYPES, BatchedAdam
+
+__all__ = ["gcnn", "gcnn_batch", "GCNNController", "GCNN_TAPS", "GCNN_FEATURES"]
+
+GCNN_TAPS = 5
+GCNN_FEATURES = 32
+_DATA, _INIT, _SELECT = 21, 22, 0xC0DE
+
+
+@register_controller("gcnn")
+@dataclass(frozen=True, eq=False)
+class GCNNController:
+    """u = tanh(sum_k S^k x h_k) w, applied at every node (numpy, batched).
+
+    Attributes
+    ----------
+    S : ndarray (N, N)
+    H : ndarray (K, F)
+        Filter taps h_{f,k} (tap k, feature f).
+    w : ndarray (F,)
+        Readout weights.
+    """
+
+    S: np.ndarray
+    H: np.ndarray
+    w: np.ndarray
+
+    def __post_init__(self):
+        for name in ("S", "H", "w"):
+            value = np.array(getattr(self, name), dtype=float)
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        if self.H.ndim != 2 or self.w.shape != (self.H.shape[1],):
+            raise ValueError(f"H must be (K, F) and w (F,), got {self.H.shape} and {self.w.shape}")
+
+    @property
+    def n_parameters(self) -> int:
+        return self.H.size + self.w.size
+
+    def reset(self, batch: int):
+        return None
+
+    def step(self, state, x):
+        powers = [x]
+        for _ in range(self.H.shape[0] - 1):
+            powers.append(powers[-1] @ self.S.T)
+        z = np.stack(powers, axis=-1) @ self.H  # (batch, N, F)
+        # torch's tanh is twice as fast as numpy's here and agrees to the last bits.
+        return torch.tanh(torch.from_numpy(z)).numpy() @ self.w, None
+
+    def arrays(self) -> dict:
+        return {"S": self.S, "H": self.H, "w": self.w}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict) -> "GCNNController":
+        return cls(arrays["S"], arrays["H"], arrays["w"])
+
+    @property
+    def support(self) -> np.ndarray:
+        return self.S != 0
+
+    def linear_gain(self) -> np.ndarray:
+        """Gain of the controller linearized at the origin: sum_k (H_k . w) S^k."""
+        coeffs = self.H @ self.w
+        K = np.zeros_like(self.S)
+        power = np.eye(self.S.shape[0])
+        for c in coeffs:
+            K += c * power
+            power = self.S @ power
+        return K
+
+
+def _init(rng: np.random.Generator, taps: int, features: int):
+    # torch defaults of the GS21 code: filter taps U(-1/sqrt(K), 1/sqrt(K)) (one input
+    # feature), readout nn.Linear(features, 1) U(-1/sqrt(features), 1/sqrt(features)).
+    H = rng.uniform(-1.0, 1.0, (taps, features)) / math.sqrt(taps)
+    w = rng.uniform(-1.0, 1.0, features) / math.sqrt(features)
+    return H, w
+
+
+@torch.no_grad()
+def _rollout_cost(S, H, w, A_t, B_t, P, x0, horizon, trace_P, ws=None):
+    J, _ = _forward(S, H, w, A_t, B_t, P, x0, horizon, keep=False, ws=ws)
+    return J / x0.shape[1] / trace_P
+
+
+def _cost(S, H, w, A_t, B_t, P, x, horizon):
+    """Summed cost J (M,) of the stack from x (M, B, N) with plain autograd ops (test reference).
+
+    Q = R = I (checked by the trainer).
+    """
+    M, Bsz, N = x.shape
+    St = S.transpose(1, 2)
+    Ht = H.transpose(1, 2)  # (M, F, K)
+    wr = w.unsqueeze(1)  # (M, 1, F)
+    J = torch.zeros(M, dtype=x.dtype)
+    for _ in range(horizon):
+        powers = [x.reshape(M, 1, Bsz * N)]
+        xp = x
+        for _ in range(H.shape[1] - 1):
+            xp = torch.bmm(xp, St)
+            powers.append(xp.reshape(M, 1, Bsz * N))
+        z = torch.bmm(Ht, torch.cat(powers, dim=1))  # (M, F, B N)
+        act = torch.sigmoid(2.0 * z) * 2.0 - 1.0  # tanh, 3x faster than torch.tanh on CPU
+        u = torch.bmm(wr, act).view(M, Bsz, N)
+        J = J + (x * x).sum((1, 2)) + (u * u).sum((1, 2))
+        x = torch.bmm(x, A_t) + torch.bmm(u, B_t)
+    return J + (torch.bmm(x, P) * x).sum((1, 2))
+
+
+def _buffers(M, Bsz, N, K, Fn, horizon, dtype, keep: bool) -> dict:
+    """Buffers reused across steps: freshly allocated megabytes cost a page fault per 4 kB."""
+    T = horizon
+    depth = T if keep else 1
+    return dict(
+        X=torch.empty(T + 1 if keep else 2, M, Bsz, N, dtype=dtype),
+        U=torch.empty(depth, M, Bsz, N, dtype=dtype),
+        XK=torch.empty(depth, M, K, Bsz, N, dtype=dtype),
+        Acts=torch.empty(depth, M, Fn, Bsz * N, dtype=dtype),
+        dz=torch.empty(M, Fn, Bsz * N, dtype=dtype) if keep else None,
+        tmp=torch.empty(M, Fn, Bsz * N, dtype=dtype) if keep else None,
+    )
+
+
+def _forward(S, H, w, A_t, B_t, P, x0, horizon, keep: bool, ws: dict | None = None):
+    """Roll the stack out from x0 (M, B, N) with in-place buffers; J (M,) summed over the batch.
+
+    With ``keep`` the trajectories and activations are kept for the backward pass.
+    """
+    M, Bsz, N = x0.shape
+    K, Fn = H.shape[1], H.shape[2]
+    BN = Bsz * N
+    T = horizon
+    St = S.transpose(1, 2)
+    Ht = H.transpose(1, 2)  # (M, F, K)
+    wr = w.unsqueeze(1)  # (M, 1, F)
+    if ws is None:
+        ws = _buffers(M, Bsz, N, K, Fn, horizon, x0.dtype, keep)
+    X, U, XK, Acts = ws["X"], ws["U"], ws["XK"], ws["Acts"]
+    J = torch.zeros(M, 1, 1, dtype=x0.dtype)
+    X[0].copy_(x0)
+    for t in range(T):
+        slot = t if keep else 0
+        x = X[t] if keep else X[t % 2]
+        x_next = X[t + 1] if keep else X[(t + 1) % 2]
+        xk = XK[slot]
+        xk[:, 0].copy_(x)
+        for k in range(1, K):
+            torch.bmm(xk[:, k - 1], St, out=xk[:, k])
+        a = Acts[slot]
+        torch.bmm(Ht, xk.view(M, K, BN), out=a)
+        torch.sigmoid(a.mul_(2.0), out=a).mul_(2.0).sub_(1.0)  # tanh, 3x faster than torch.tanh
+        u = U[slot]
+        torch.bmm(wr, a, out=u.view(M, 1, BN))
+        torch.bmm(x, A_t, out=x_next)
+        x_next.baddbmm_(u, B_t)
+        J.baddbmm_(x.view(M, 1, BN), x.view(M, BN, 1))
+        J.baddbmm_(u.view(M, 1, BN), u.view(M, BN, 1))
+    xT = X[T] if keep else X[T % 2]
+    PxT = torch.bmm(xT, P)
+    J.baddbmm_(xT.view(M, 1, BN), PxT.view(M, BN, 1))
+    return J.view(M), (X, U, XK, Acts, PxT)
+
+
+def _loss_and_grad(S, H, w, A_t, B_t, P, x0, horizon, ws: dict | None = None):
+    """Per-model mean cost J / B and its gradient w.r.t. (H, w), by hand-written BPTT.
+
+    Same model as :func:`_cost` (the autograd reference in the tests); the
+    backward pass reuses the stored activations and buffers instead of
+    allocating fresh (M, 32, B N) tensors at every operation.
+    """
+    M, Bsz, N = x0.shape
+    K, Fn = H.shape[1], H.shape[2]
+    BN = Bsz * N
+    T = horizon
+    if ws is None:
+        ws = _buffers(M, Bsz, N, K, Fn, horizon, x0.dtype, keep=True)
+    J, (X, U, XK, Acts, PxT) = _forward(S, H, w, A_t, B_t, P, x0, horizon, keep=True, ws=ws)
+    wc = w.unsqueeze(2)  # (M, F, 1)
+    c2 = 2.0 / Bsz
+    A = A_t.transpose(1, 2)
+    Bm = B_t.transpose(1, 2)
+    lam = PxT * c2
+    dHt = torch.zeros(M, Fn, K, dtype=x0.dtype)
+    dw = torch.zeros(M, 1, Fn, dtype=x0.dtype)
+    du = torch.empty(M, Bsz, N, dtype=x0.dtype)
+    dz, tmp = ws["dz"], ws["tmp"]
+    dXK = torch.empty(M, K, Bsz, N, dtype=x0.dtype)
+    for t in range(T - 1, -1, -1):
+        a = Acts[t]
+        torch.baddbmm(U[t], lam, Bm, beta=c2, out=du)
+        dw.baddbmm_(du.view(M, 1, BN), a.transpose(1, 2))
+        torch.mul(a, a, out=tmp)
+        tmp.sub_(1.0)  # a^2 - 1 = -tanh'
+        torch.bmm(wc, du.view(M, 1, BN), out=dz)
+        dz.mul_(tmp).neg_()
+        dHt.baddbmm_(dz, XK[t].view(M, K, BN).transpose(1, 2))
+        if t == 0:
+            break
+        torch.bmm(H, dz, out=dXK.view(M, K, BN))
+        g = dXK[:, K - 1]
+        for k in range(K - 2, -1, -1):
+            g = torch.baddbmm(dXK[:, k], g, S)
+        lam_next = torch.baddbmm(g, lam, A)
+        lam_next.add_(X[t], alpha=c2)
+        lam = lam_next
+    return J / Bsz, [dHt.transpose(1, 2).contiguous(), dw.view(M, Fn)]
+
+
+@dataclass
+class _GJob:
+    instance: object
+    seed: int
+    params: dict
+    settings: dict
+
+
+def gcnn_batch(jobs, *, stack_size: int = 64) -> list[Design]:
+    """Train many GCNN designs together; ``jobs`` is an iterable of (Instance, kwargs of :func:`gcnn`)."""
+    parsed = []
+    for instance, kwargs in jobs:
+        kwargs = dict(kwargs)
+        seed = kwargs.pop("seed", 0)
+        unknown = set(kwargs) - set(_DEFAULTS)
+        if unknown:
+            raise ValueError(f"unknown GCNN settings: {sorted(unknown)}; known: {sorted(_DEFAULTS)}")
+        s = {**_DEFAULTS, **kwargs}
+        _check(instance, seed, s)
+        params = {"seed": int(seed), **{k: s[k] for k in sorted(kwargs) if s[k] != _DEFAULTS[k]}}
+        parsed.append(_GJob(instance, int(seed), params, s))
+    specs = [(j, m) for j, job in enumerate(parsed) for m in range(job.settings["ensemble"])]
+    groups: dict[tuple, list] = {}
+    for j, m in specs:
+        s = parsed[j].settings
+        key = (s["steps"], s["batch"], s["dtype"], s["curve_every"], s["curve_size"], parsed[j].instance.horizon,
+               parsed[j].instance.n)
+        groups.setdefault(key, []).append((j, m))
+    trained: dict[tuple, dict] = {}
+    seconds = [0.0] * len(parsed)
+    for key, members in groups.items():
+        for start in range(0, len(members), stack_size):
+            chunk = members[start:start + stack_size]
+            t0 = time.perf_counter()
+            out = _train([(parsed[j], m) for j, m in chunk], *key[:5])
+            share = (time.perf_counter() - t0) / len(chunk)
+            for (j, m), result in zip(chunk, out):
+                trained[(j, m)] = result
+                seconds[j] += share
+    return [_finish(job, [trained[(j, m)] for m in range(job.settings["ensemble"])], seconds[j])
+            for j, job in enumerate(parsed)]
+
+
+@torch.no_grad()
+def _train(members, steps, batch, dtype, curve_every, curve_size):
+    tdt = DTYPES[dtype]
+    M = len(members)
+    insts = [job.instance for job, _ in members]
+    if any(not (np.array_equal(i.Q, np.eye(i.n)) and np.array_equal(i.R, np.eye(i.n))) for i in insts):
+        raise ValueError("the GCNN trainer supports Q = R = I only (the paper's family)")
+    horizon = insts[0].horizon
+
+    def stack(arrays):
+        return torch.tensor(np.stack(arrays), dtype=tdt)
+
+    S = stack([i.gso for i in insts])
+    A_t = stack([i.A.T for i in insts])
+    B_t = stack([i.B.T for i in insts])
+    P = stack([i.P for i in insts])
+    trace_P = torch.tensor([i.trace_P for i in insts], dtype=tdt)
+    inits = [_init(np.random.default_rng([job.seed, m, _INIT]), GCNN_TAPS, GCNN_FEATURES) for job, m in members]
+    H = stack([h for h, _ in inits])
+    w = stack([w for _, w in inits])
+    lr0 = torch.tensor([job.settings["lr"] for job, _ in members], dtype=tdt)
+    decay = torch.tensor([job.settings["decay"] for job, _ in members], dtype=tdt)
+    every = members[0][0].settings["decay_every"]
+    adam = BatchedAdam([H, w], weight_decay=members[0][0].settings["weight_decay"])
+    rngs = [np.random.default_rng([job.seed, m, _DATA]) for job, m in members]
+    curve_x0 = stack([np.random.default_rng([job.instance.seed, _SELECT]).standard_normal((curve_size, job.instance.n))
+                      for job, _ in members])
+    alive = torch.ones(M, dtype=torch.bool)
+    diverged_at = [None] * M
+    steps_rec, costs_rec = [], []
+
+    n = insts[0].n
+    ws_train = _buffers(M, batch, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=True)
+    ws_curve = _buffers(M, curve_size, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=False)
+
+    def record(k):
+        steps_rec.append(k)
+        costs_rec.append(_rollout_cost(S, H, w, A_t, B_t, P, curve_x0, horizon, trace_P, ws_curve))
+
+    for k in range(steps):
+        if curve_every and k % curve_every == 0:
+            record(k)
+        x0 = stack([rng.standard_normal((batch, insts[0].n)) for rng in rngs]) * alive.view(M, 1, 1).to(tdt)
+        loss, grads = _loss_and_grad(S, H, w, A_t, B_t, P, x0, horizon, ws_train)
+        finite = torch.isfinite(loss) & torch.isfinite(grads[0].flatten(1).sum(1)) & torch.isfinite(grads[1].sum(1))
+        bad = alive & ~finite
+        if bool(bad.any()):
+            for m in torch.nonzero(bad).flatten().tolist():
+                diverged_at[m] = k
+            alive &= ~bad
+            for p in (H, w):
+                p.copy_(torch.where(alive.view((-1,) + (1,) * (p.dim() - 1)), p, torch.zeros_like(p)))
+            grads = [torch.nan_to_num(g, nan=0.0, posinf=0.0, neginf=0.0) for g in grads]
+        # StepLR(gamma=0.9) stepped after updates 0, 10, 20, ... as in the paper code.
+        lr = lr0 * decay ** math.ceil(k / every) * alive.to(tdt)
+        adam.step(grads, lr)
+    record(steps)
+    costs = torch.stack(costs_rec).numpy()
+    return [
+        dict(H=H[m].numpy().astype(float), w=w[m].numpy().astype(float),
+             S=S[m].numpy().astype(float), ok=bool(alive[m]), diverged_at=diverged_at[m],
+             curve={"step": list(steps_rec), "cost": [float(c) for c in costs[:, m]]})
+        for m in range(M)
+    ]
+
+
+def _finish(job: _GJob, results, seconds) -> Design:
+    finals = [r["curve"]["cost"][-1] if r["ok"] else np.inf for r in results]
+    finals = [c if np.isfinite(c) else np.inf for c in finals]
+    extras = {"ensemble_curve_costs": [float(c) for c in finals],
+              "diverged_members": sum(not r["ok"] for r in results)}
+    links, self_loops = count_links(job.instance.comm_adj)
+    best = int(np.argmin(finals))
+    if not np.isfinite(finals[best]):
+        return Design.failure("gcnn", job.params, "diverged", "every ensemble member diverged",
+                              info_model="instantaneous", seconds=seconds, links=links,
+                              self_loops=self_loops, extras=extras)
+    r = results[best]
+    controller = GCNNController(r["S"], r["H"], r["w"])
+    extras["curve"] = r["curve"]
+    extras["n_parameters"] = controller.n_parameters
+    extras["spectral_radius"] = spectral_radius(job.instance.A + job.instance.B @ controller.linear_gain())
+    s = job.settings
+    if s["stability_steps"]:
+        long = simulate(job.instance, controller, validation_set(job.instance)[:s["stability_size"]],
+                        steps=s["stability_steps"])
+        extras["bounded"] = bool(long.bounded)
+        extras["max_state"] = float(long.max_state)
+        extras["stability_steps"] = s["stability_steps"]
+    rollout = simulate(job.instance, controller)
+    if not rollout.bounded:
+        return Design.failure("gcnn", job.params, "diverged", "validation rollout unbounded",
+                              info_model="instantaneous", seconds=seconds, links=links,
+                              self_loops=self_loops, extras=extras)
+    return Design(method="gcnn", params=job.params, controller=controller, cost=rollout.cost, links=links,
+                  self_loops=self_loops, info_model="instantaneous", status="optimal",
+                  message="" if not extras["diverged_members"] else
+                  f"{extras['diverged_members']} of {len(results)} ensemble members diverged",
+                  seconds=seconds, cost_stderr=rollout.stderr, cost_kind="simulated", extras=extras)
+
+
+_DEFAULTS = dict(steps=750, batch=20, lr=0.01, decay=0.9, decay_every=10, weight_decay=2.0, ensemble=2,
+                 curve_every=10, curve_size=100, dtype="float64", stability_steps=500, stability_size=100)
+
+
+def _check(instance, seed, s):
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    for key in ("steps", "batch", "decay_every", "ensemble", "curve_size", "stability_size"):
+        if isinstance(s[key], bool) or not isinstance(s[key], (int, np.integer)) or s[key] < 1:
+            raise ValueError(f"{key} must be a positive integer, got {s[key]!r}")
+    if not s["lr"] > 0 or not 0 < s["decay"] <= 1 or s["weight_decay"] < 0:
+        raise ValueError(f"need lr > 0, 0 < decay <= 1, weight_decay >= 0; got {s['lr']}, {s['decay']}, "
+                         f"{s['weight_decay']}")
+    if s["curve_every"] < 0 or s["stability_steps"] < 0:
+        raise ValueError("curve_every and stability_steps must be non-negative")
+    if s["dtype"] not in DTYPES:
+        raise ValueError(f"dtype must be one of {sorted(DTYPES)}, got {s['dtype']!r}")
+
+
+def gcnn(instance, *, seed: int = 0, steps: int = 750, batch: int = 20, lr: float = 0.01, decay: float = 0.9,
+         decay_every: int = 10, weight_decay: float = 2.0, ensemble: int = 2, curve_every: int = 10,
+         curve_size: int = 100, dtype: str = "float64", stability_steps: int = 500,
+         stability_size: int = 100) -> Design:
+    """Gama-Sojoudi GCNN (192 parameters, instantaneous multi-hop information), trained as the paper did.
+
+    Parameters
+    ----------
+    instance : Instance
+    seed : int
+        Seeds initializations and training draws (member k of the ensemble uses (seed, k)).
+    steps, batch, lr, decay, decay_every, weight_decay
+        Adam updates, x(0) draws per update, learning rate multiplied by ``decay``
+        after updates 0, ``decay_every``, 2 ``decay_every``, ..., coupled L2 weight decay.
+    ensemble : int
+        Models trained; the one with the lowest cost on a separate selection set is kept.
+    curve_every, curve_size, dtype, stability_steps, stability_size
+        As in :func:`codesign.grnn`.
+
+    Returns
+    -------
+    Design
+        Simulated cost on the validation set; links are the given graph's
+        off-diagonal edges, ``info_model="instantaneous"``; ``extras`` holds the
+        training curve, ``n_parameters``, the spectral radius of the closed loop
+        linearized at the origin, and the boundedness of a long rollout.
+    """
+    settings = dict(steps=steps, batch=batch, lr=lr, decay=decay, decay_every=decay_every,
+                    weight_decay=weight_decay, ensemble=ensemble, curve_every=curve_every, curve_size=curve_size,
+                    dtype=dtype, stability_steps=stability_steps, stability_size=stability_size)
+    return gcnn_batch([(instance, {"seed": seed, **settings})])[0]
+
+
+def _batch(pairs, **options):
+    return [[d] for d in gcnn_batch(pairs, **options)]
+
+
+gcnn.batch = _batch  # lets a runner train many GCNN runs in shared stacks

@@ -1,0 +1,467 @@
+"""The GRNN distributed controller and its co-design (Yang & Matni 2021, Sec. II-C, III).
+
+    Z(t+1) = tanh(S Z(t) W + x(t) F),   u(t) = Z(t+1) G,   Z(0) = 0,
+
+with S supported on the communication graph: node i reads its neighbours'
+hidden states once per step, so information travels one hop per time step.
+
+Entry points: :func:`grnn` (one instance, one variant) and :func:`grnn_batch`
+(many (instance, settings) jobs trained together as one stack of models by
+:func:`codesign.training.train_stack`).
+"""
+
+from __future__ import annotations
+
+import inspect
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .controllers import register_controller
+from .design import Design, count_links
+from .evaluation import simulate, spectral_radius, validation_set
+from .training import DTYPES, ModelSpec, init_fwg, train_stack
+
+__all__ = ["GRNNController", "grnn", "grnn_batch", "grnn_method", "VARIANTS", "grnn_defaults", "paper_beta",
+           "PAPER_BETA"]
+
+VARIANTS = ("given", "dense", "fixed", "sparse")
+
+#: Salts that keep the random streams of one (instance, seed) apart.
+_DATA, _INIT, _DENSE_S, _REFINE, _SELECT = 11, 12, 13, 14, 0xC0DE
+
+
+@register_controller("grnn")
+@dataclass(frozen=True, eq=False)
+class GRNNController:
+    """A trained GRNN as the common simulator sees it (numpy, batched).
+
+    Attributes
+    ----------
+    S : ndarray (N, N)
+        Graph shift operator; its off-diagonal support is the set of links.
+    F : ndarray (h,)
+    W : ndarray (h, h)
+    G : ndarray (h,)
+    """
+
+    S: np.ndarray
+    F: np.ndarray
+    W: np.ndarray
+    G: np.ndarray
+
+    def __post_init__(self):
+        for name in ("S", "F", "W", "G"):
+            value = np.array(getattr(self, name), dtype=float)
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        h = self.F.size
+        if self.S.ndim != 2 or self.S.shape[0] != self.S.shape[1]:
+            raise ValueError(f"S must be square, got shape {self.S.shape}")
+        if self.W.shape != (h, h) or self.G.size != h:
+            raise ValueError(f"F, W, G must have shapes (h,), (h, h), (h,); got {self.F.shape}, "
+                             f"{self.W.shape}, {self.G.shape}")
+        object.__setattr__(self, "F", self.F.ravel())
+        object.__setattr__(self, "G", self.G.ravel())
+
+    @property
+    def hidden(self) -> int:
+        return self.F.size
+
+    def reset(self, batch: int):
+        # Hidden state kept node-major, (N, batch, h), so that S acts by one matrix product.
+        return np.zeros((self.S.shape[0], batch, self.hidden))
+
+    def step(self, state, x):
+        n, batch, h = state.shape
+        SZW = (self.S @ (state.reshape(n * batch, h) @ self.W).reshape(n, batch * h)).reshape(n, batch, h)
+        Z = np.tanh(SZW + x.T[:, :, None] * self.F)
+        return (Z @ self.G).T, Z
+
+    def arrays(self) -> dict:
+        return {"S": self.S, "F": self.F, "W": self.W, "G": self.G}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict) -> "GRNNController":
+        return cls(arrays["S"], arrays["F"], arrays["W"], arrays["G"])
+
+    @property
+    def support(self) -> np.ndarray:
+        return self.S != 0
+
+    def linearized_closed_loop(self, instance) -> np.ndarray:
+        """Closed loop in (x, vec Z) linearized at the origin (tanh'(0) = 1).
+
+        With z = vec(Z) row-major: z' = (S kron W') z + (I kron F') x,
+        u = (I kron G') z', x' = A x + B u.
+        """
+        n, h = self.S.shape[0], self.hidden
+        Kzz = np.kron(self.S, self.W.T)
+        Kzx = np.kron(np.eye(n), self.F.reshape(h, 1))
+        Gm = np.kron(np.eye(n), self.G.reshape(1, h))
+        top = np.hstack([instance.A + instance.B @ Gm @ Kzx, instance.B @ Gm @ Kzz])
+        bottom = np.hstack([Kzx, Kzz])
+        return np.vstack([top, bottom])
+
+
+def grnn_defaults() -> dict:
+    """The paper code's training settings (DESIGN.md Sec. 3), by name."""
+    return dict(
+        steps=750, batch=20, hidden=5, lr=0.02, l1_lr=0.03, clip=10.0, frob=2.0,
+        ensemble=2, refine_ensemble=1, threshold=4e-3, curve_every=10, curve_size=100,
+        dtype="float64", stability_steps=500, stability_size=100,
+    )
+
+
+@dataclass
+class _Job:
+    instance: object
+    variant: str
+    beta: float | None
+    seed: int
+    settings: dict
+    params: dict
+
+
+def _check_job(instance, variant, beta, seed, settings) -> dict:
+    if variant not in VARIANTS:
+        raise ValueError(f"variant must be one of {VARIANTS}, got {variant!r}")
+    if variant == "sparse":
+        if not (isinstance(beta, (int, float, np.floating)) and np.isfinite(beta) and beta >= 0):
+            raise ValueError(f"beta must be a finite non-negative number, got {beta!r}")
+    elif beta is not None:
+        raise ValueError(f"beta applies to variant 'sparse' only, got beta={beta!r} with variant {variant!r}")
+    unknown = set(settings) - set(grnn_defaults())
+    if unknown:
+        raise ValueError(f"unknown GRNN settings: {sorted(unknown)}; known: {sorted(grnn_defaults())}")
+    s = {**grnn_defaults(), **settings}
+    for key in ("steps", "batch", "hidden", "ensemble", "refine_ensemble", "curve_size", "stability_size"):
+        if isinstance(s[key], bool) or not isinstance(s[key], (int, np.integer)) or s[key] < 1:
+            raise ValueError(f"{key} must be a positive integer, got {s[key]!r}")
+    for key in ("lr", "l1_lr"):
+        if not s[key] > 0:
+            raise ValueError(f"{key} must be positive, got {s[key]!r}")
+    for key in ("clip", "frob", "threshold", "curve_every", "stability_steps"):
+        if s[key] is None or s[key] < 0:
+            raise ValueError(f"{key} must be non-negative, got {s[key]!r}")
+    if s["curve_size"] < 2:
+        raise ValueError(f"curve_size must be at least 2, got {s['curve_size']}")
+    if s["dtype"] not in DTYPES:
+        raise ValueError(f"dtype must be one of {sorted(DTYPES)}, got {s['dtype']!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    return s
+
+
+#: The l1 weights the paper used for Table 1, by ||A||.
+PAPER_BETA = {0.995: 1.0, 1.05: 2.0}
+
+
+def paper_beta(instance) -> float:
+    """The paper's Table 1 l1 weight for this instance's ||A|| (1 for 0.995, 2 for 1.05)."""
+    a_norm = instance.spec.get("a_norm")
+    for key, value in PAPER_BETA.items():
+        if a_norm is not None and abs(a_norm - key) < 1e-12:
+            return value
+    raise ValueError(
+        f"variant 'sparse' needs beta (the l1 weight); the paper's Table 1 values exist only for "
+        f"a_norm in {sorted(PAPER_BETA)}, this instance has a_norm={a_norm!r}"
+    )
+
+
+def _selection_set(instance, size: int) -> np.ndarray:
+    """Initial conditions for the training curve and ensemble selection.
+
+    Drawn apart from the reporting validation set so that picking the best
+    ensemble member does not bias the reported cost.
+    """
+    return np.random.default_rng([instance.seed, _SELECT]).standard_normal((size, instance.n))
+
+
+def _spec(job: _Job, member: int, *, S0, mask, lr, beta, penalty, init_salt) -> ModelSpec:
+    inst, s = job.instance, job.settings
+    F, W, G = init_fwg(np.random.default_rng([job.seed, member, init_salt]), s["hidden"])
+    return ModelSpec(
+        A=inst.A, B=inst.B, Q=inst.Q, R=inst.R, P=inst.P, trace_P=inst.trace_P,
+        S0=np.asarray(S0, dtype=float), mask=np.asarray(mask, dtype=bool), F0=F, W0=W, G0=G,
+        data_seed=[job.seed, member, _DATA], curve_x0=_selection_set(inst, s["curve_size"]),
+        lr=lr, beta=beta, penalty=penalty,
+    )
+
+
+def _dense_init(job: _Job, member: int) -> np.ndarray:
+    rng = np.random.default_rng([job.seed, member, _DENSE_S])
+    S = rng.random((job.instance.n, job.instance.n))
+    return S / S.sum(axis=1, keepdims=True)  # row-stochastic, as in the paper code
+
+
+def _first_stage_specs(job: _Job) -> list[ModelSpec]:
+    inst, s = job.instance, job.settings
+    frob = s["frob"]
+    standard = (frob, frob, 0.0, frob)
+    n = inst.n
+    specs = []
+    for member in range(s["ensemble"]):
+        if job.variant == "given":
+            specs.append(_spec(job, member, S0=inst.gso, mask=inst.comm_adj != 0,
+                               lr=s["lr"], beta=0.0, penalty=standard, init_salt=_INIT))
+        elif job.variant == "fixed":
+            specs.append(_spec(job, member, S0=inst.gso, mask=np.zeros((n, n), bool),
+                               lr=s["lr"], beta=0.0, penalty=standard, init_salt=_INIT))
+        elif job.variant == "dense":
+            specs.append(_spec(job, member, S0=_dense_init(job, member),
+                               mask=np.ones((n, n), bool), lr=s["lr"], beta=0.0, penalty=standard,
+                               init_salt=_INIT))
+        else:  # l1 stage: the paper code's sparse_criterion penalizes ||S|| and ||F|| only
+            specs.append(_spec(job, member, S0=_dense_init(job, member),
+                               mask=np.ones((n, n), bool), lr=s["l1_lr"], beta=float(job.beta),
+                               penalty=(frob, frob, 0.0, 0.0), init_salt=_INIT))
+    return specs
+
+
+def _refine_specs(job: _Job, S_l1: np.ndarray) -> list[ModelSpec]:
+    s = job.settings
+    frob = s["frob"]
+    mask = np.abs(S_l1) >= s["threshold"]
+    return [
+        _spec(job, member, S0=np.where(mask, S_l1, 0.0), mask=mask, lr=s["lr"],
+              beta=0.0, penalty=(frob, frob, 0.0, frob), init_salt=_REFINE)
+        for member in range(s["refine_ensemble"])
+    ]
+
+
+def _train_groups(specs_by_job: list[list[ModelSpec]], jobs: list[_Job], stack_size: int):
+    """Train every spec, grouping jobs with the same loop settings into stacks."""
+    results: list[list] = [[None] * len(specs) for specs in specs_by_job]
+    seconds = [0.0] * len(jobs)
+    groups: dict[tuple, list[tuple[int, int]]] = {}
+    for j, (job, specs) in enumerate(zip(jobs, specs_by_job)):
+        s = job.settings
+        key = (s["steps"], s["batch"], job.instance.horizon, s["clip"], s["curve_every"], s["dtype"],
+               s["hidden"], s["curve_size"], job.instance.n)
+        groups.setdefault(key, []).extend((j, k) for k in range(len(specs)))
+    for key, members in groups.items():
+        steps, batch, horizon, clip, curve_every, dtype = key[:6]
+        for start in range(0, len(members), stack_size):
+            chunk = members[start:start + stack_size]
+            t0 = time.perf_counter()
+            out = train_stack([specs_by_job[j][k] for j, k in chunk], steps=steps, batch=batch,
+                              horizon=horizon, clip=clip, curve_every=curve_every, dtype=dtype)
+            share = (time.perf_counter() - t0) / len(chunk)
+            for (j, k), result in zip(chunk, out):
+                results[j][k] = result
+                seconds[j] += share
+    return results, seconds
+
+
+def _best(results) -> int | None:
+    costs = [r.final_curve_cost if r.status == "ok" else np.inf for r in results]
+    costs = [c if np.isfinite(c) else np.inf for c in costs]
+    best = int(np.argmin(costs))
+    return None if not np.isfinite(costs[best]) else best
+
+
+def _curve(result) -> dict:
+    return {"step": list(result.curve_step), "cost": [float(c) for c in result.curve_cost]}
+
+
+def grnn_batch(jobs, *, stack_size: int = 128) -> list[Design]:
+    """Train many GRNN designs together; one :class:`Design` per job, in order.
+
+    Parameters
+    ----------
+    jobs : iterable of (Instance, dict)
+        Each dict holds :func:`grnn`'s keyword arguments (``variant``, ``beta``,
+        ``seed`` and any setting of :func:`grnn_defaults`). Jobs with the same
+        loop settings (steps, batch, horizon, dtype, ...) share stacks of up to
+        ``stack_size`` models: ensemble members, variants, instances and the
+        sparse variant's l1 stage all train side by side, then all refinements.
+    """
+    parsed: list[_Job] = []
+    for instance, kwargs in jobs:
+        kwargs = dict(kwargs)
+        variant = kwargs.pop("variant", "given")
+        beta = kwargs.pop("beta", None)
+        seed = kwargs.pop("seed", 0)
+        if variant == "sparse" and beta is None:
+            beta = paper_beta(instance)
+        settings = _check_job(instance, variant, beta, seed, kwargs)
+        defaults = grnn_defaults()
+        params = {"variant": variant, "seed": int(seed),
+                  **{k: settings[k] for k in sorted(kwargs) if settings[k] != defaults[k]}}
+        if beta is not None:
+            params["beta"] = float(beta)
+        parsed.append(_Job(instance, variant, None if beta is None else float(beta), int(seed), settings, params))
+    if not parsed:
+        return []
+
+    first, seconds = _train_groups([_first_stage_specs(job) for job in parsed], parsed, stack_size)
+    chosen = [_best(results) for results in first]
+
+    refine_jobs = [j for j, job in enumerate(parsed) if job.variant == "sparse" and chosen[j] is not None]
+    l1_S = {j: first[j][chosen[j]].S for j in refine_jobs}
+    refined, refine_seconds = _train_groups([_refine_specs(parsed[j], l1_S[j]) for j in refine_jobs],
+                                            [parsed[j] for j in refine_jobs], stack_size)
+    refined_by_job = dict(zip(refine_jobs, refined))
+    for idx, j in enumerate(refine_jobs):
+        seconds[j] += refine_seconds[idx]
+
+    designs = []
+    for j, job in enumerate(parsed):
+        designs.append(_finish(job, first[j], chosen[j], refined_by_job.get(j), seconds[j]))
+    return designs
+
+
+def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
+    method = "grnn" if job.variant == "given" else f"grnn_{job.variant}"
+    extras: dict = {
+        "variant": job.variant,
+        "ensemble_curve_costs": [r.final_curve_cost for r in first],
+        "diverged_members": sum(r.status == "diverged" for r in first),
+    }
+    if chosen is None:
+        return Design.failure(method, job.params, "diverged",
+                              f"all {len(first)} ensemble members diverged (non-finite loss or gradient)",
+                              info_model="delayed", seconds=seconds, extras=extras)
+    result = first[chosen]
+    if job.variant == "sparse":
+        l1 = result
+        extras["l1_curve"] = _curve(l1)
+        extras["l1_links"], extras["l1_self_loops"] = count_links(np.abs(l1.S) >= job.settings["threshold"])
+        best = _best(refined) if refined else None
+        extras["refine_curve_costs"] = [r.final_curve_cost for r in refined]
+        if best is None:
+            return Design.failure(method, job.params, "diverged", "every refinement run diverged",
+                                  info_model="delayed", seconds=seconds, extras=extras)
+        result = refined[best]
+    controller = GRNNController(result.S, result.F, result.W, result.G)
+    links, self_loops = count_links(controller.S)
+    extras["curve"] = _curve(result)
+    extras["spectral_radius"] = spectral_radius(controller.linearized_closed_loop(job.instance))
+    rollout = simulate(job.instance, controller)
+    steps = int(job.settings["stability_steps"])
+    if steps:
+        long = simulate(job.instance, controller, validation_set(job.instance)[:job.settings["stability_size"]],
+                        steps=steps)
+        extras["bounded"] = bool(long.bounded)
+        extras["max_state"] = float(long.max_state)
+        extras["stability_steps"] = steps
+    if not rollout.bounded or not np.isfinite(rollout.cost):
+        return Design.failure(method, job.params, "diverged",
+                              "the trained controller's validation rollout is unbounded",
+                              info_model="delayed", seconds=seconds, links=links, self_loops=self_loops,
+                              extras=extras)
+    message = ""
+    if extras["diverged_members"]:
+        message = f"{extras['diverged_members']} of {len(first)} ensemble members diverged"
+    return Design(
+        method=method,
+        params=job.params,
+        controller=controller,
+        cost=rollout.cost,
+        links=links,
+        self_loops=self_loops,
+        info_model="delayed",
+        status="optimal",
+        message=message,
+        seconds=seconds,
+        cost_stderr=rollout.stderr,
+        cost_kind="simulated",
+        extras=extras,
+    )
+
+
+def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: int = 0,
+         steps: int = 750, batch: int = 20, hidden: int = 5, lr: float = 0.02, l1_lr: float = 0.03,
+         clip: float = 10.0, frob: float = 2.0, ensemble: int = 2, refine_ensemble: int = 1,
+         threshold: float = 4e-3, curve_every: int = 10, curve_size: int = 100,
+         dtype: str = "float64", stability_steps: int = 500, stability_size: int = 100) -> Design:
+    """Train a GRNN distributed controller on ``instance`` (paper Sec. III).
+
+    Parameters
+    ----------
+    instance : Instance
+    variant : {"given", "dense", "fixed", "sparse"}
+        ``given``: S trains on the given graph's support (self-loops included),
+        starting at the normalized adjacency. ``dense``: all N^2 entries train,
+        starting row-stochastic random. ``fixed``: S frozen at the normalized
+        adjacency. ``sparse``: co-design: an l1 stage on a dense S with weight
+        ``beta`` (learning rate ``l1_lr``), entries with ``|S_ij| < threshold``
+        zeroed, then a refinement on that support from the l1 values with F, W, G
+        re-initialized.
+    beta : float, optional
+        l1 weight, only allowed with ``variant="sparse"``. None there means the
+        paper's Table 1 value for the instance's ||A||: 1 for 0.995, 2 for 1.05
+        (ValueError for other norms).
+    seed : int
+        Seeds the training draws and initializations (member k of the ensemble
+        uses streams derived from (seed, k)).
+    steps, batch, hidden, lr, clip, frob
+        Adam updates (cosine-annealed learning rate), x(0) draws per update,
+        hidden size h, learning rate, gradient-norm clip, weight of the plain
+        Frobenius norms of S, F, G in the loss (W is not penalized).
+    ensemble : int
+        Models trained per setting; the one with the lowest cost on a separate
+        ``curve_size``-draw selection set is kept (for ``sparse``: of the l1 stage).
+    refine_ensemble : int
+        Refinement runs of the ``sparse`` variant (the paper code used one).
+    curve_every : int
+        Record the selection-set cost every this many updates (0: only at the end).
+    dtype : {"float64", "float32"}
+    stability_steps, stability_size : int
+        Length of the boundedness check rollout (0 skips it) and how many draws
+        of the validation set it starts from.
+
+    Returns
+    -------
+    Design
+        ``cost`` is simulated on the instance's validation set (1000 draws) with
+        its standard error; ``extras`` holds the training curve
+        (``extras["curve"] = {"step": [...], "cost": [...]}``), the linearized
+        closed loop's ``spectral_radius`` and whether a ``stability_steps``
+        rollout stays ``bounded``. Links are the off-diagonal support of S,
+        with one step of delay per hop (``info_model="delayed"``).
+    """
+    settings = dict(steps=steps, batch=batch, hidden=hidden, lr=lr, l1_lr=l1_lr, clip=clip, frob=frob,
+                    ensemble=ensemble, refine_ensemble=refine_ensemble, threshold=threshold,
+                    curve_every=curve_every, curve_size=curve_size, dtype=dtype,
+                    stability_steps=stability_steps, stability_size=stability_size)
+    return grnn_batch([(instance, {"variant": variant, "beta": beta, "seed": seed, **settings})])[0]
+
+
+def grnn_method(variant: str):
+    """``grnn`` with the variant bound, as the comparison harness registers it.
+
+    The returned function has :func:`grnn`'s keyword-only signature minus
+    ``variant`` (and minus ``beta`` unless ``variant="sparse"``), and a
+    ``batch(pairs)`` attribute: given [(instance, params), ...] it trains them
+    all in shared stacks and returns one list of designs per pair, which is how
+    a runner can make a sweep cost a fraction of separate trainings.
+    """
+    if variant not in VARIANTS:
+        raise ValueError(f"variant must be one of {VARIANTS}, got {variant!r}")
+
+    def method(instance, **kwargs):
+        return grnn(instance, variant=variant, **kwargs)
+
+    def batch(pairs, **options):
+        return [[d] for d in grnn_batch([(inst, {**params, "variant": variant}) for inst, params in pairs],
+                                        **options)]
+
+    sig = inspect.signature(grnn)
+    keep = [p for name, p in sig.parameters.items()
+            if name != "variant" and (variant == "sparse" or name != "beta")]
+    method.__signature__ = sig.replace(parameters=keep)
+    method.__name__ = method.__qualname__ = "grnn" if variant == "given" else f"grnn_{variant}"
+    method.__doc__ = _METHOD_DOCS[variant] + "\n\nSee :func:`codesign.grnn` for the hyperparameters."
+    method.batch = batch
+    return method
+
+
+_METHOD_DOCS = {
+    "given": "GRNN with S trained on the given communication graph (one step delay per hop).",
+    "dense": "GRNN with all N^2 entries of S trained (a centralized, delayed controller).",
+    "fixed": "GRNN with S frozen at the normalized adjacency; only F, W, G train.",
+    "sparse": "GRNN co-design: l1 stage on a dense S, threshold, refinement on the found support.",
+}

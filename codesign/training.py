@@ -1,0 +1,489 @@
+"""Batched training of many independent GRNN controllers at once.
+
+A stack of M models (different instances, variants, regularization weights,
+ensemble members) is advanced together: every tensor carries a leading model
+axis, so each operation does M models' work and the per-operation overhead of
+torch is paid once per stack instead of once per model. The models never mix:
+each has its own data stream, Adam state, learning-rate schedule, gradient
+clipping, support mask and divergence flag, so a stacked run gives the same
+parameters as M separate runs with the same seeds.
+
+The gradient is a hand-written backward pass through time (BPTT) of
+
+    Z(t+1) = tanh(S Z(t) W + x(t) F),  u(t) = Z(t+1) G,  x(t+1) = A x(t) + B u(t),
+
+checked against autograd in the tests (:func:`loss_autograd`). Doing it by hand
+avoids autograd's graph bookkeeping and lets tanh be evaluated as
+``2 sigmoid(2 x) - 1``, which is three times faster than ``torch.tanh`` on CPU and
+equal to it within 4e-16.
+
+Tensor layout (model axis first, nodes next, so that ``S @`` is one batched
+matmul with no transposes): x, u ``(M, N, B)``; Z ``(M, N, B, h)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+__all__ = [
+    "ModelSpec",
+    "TrainResult",
+    "train_stack",
+    "BatchedAdam",
+    "rollout_cost",
+    "loss_autograd",
+    "grnn_loss_and_grad",
+    "init_fwg",
+    "DTYPES",
+]
+
+DTYPES = {"float64": torch.float64, "float32": torch.float32}
+
+
+def _tanh_(pre: torch.Tensor) -> torch.Tensor:
+    """In-place tanh(pre) as 2 sigmoid(2 pre) - 1 (fast on CPU, abs error < 4e-16)."""
+    return torch.sigmoid(pre.mul_(2.0), out=pre).mul_(2.0).sub_(1.0)
+
+
+def init_fwg(rng: np.random.Generator, hidden: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """F (h,), W (h, h), G (h,): uniform [0, 1) entries scaled to spectral norm 1 (paper code)."""
+    F = rng.random((1, hidden))
+    G = rng.random((hidden, 1))
+    W = rng.random((hidden, hidden))
+    return (F / np.linalg.norm(F, 2)).ravel(), W / np.linalg.norm(W, 2), (G / np.linalg.norm(G, 2)).ravel()
+
+
+@dataclass
+class ModelSpec:
+    """Everything one model of a stack needs.
+
+    Attributes
+    ----------
+    A, B, Q, R, P : ndarray (N, N)
+        Plant and costs (terminal cost P).
+    trace_P : float
+        Normalizer of reported costs.
+    S0 : ndarray (N, N)
+        Initial graph shift operator (zero outside ``mask`` when S trains).
+    mask : ndarray (N, N) of bool
+        Entries of S that train; all False freezes S.
+    F0, W0, G0 : ndarray
+        Initial F (h,), W (h, h), G (h,).
+    data_seed : int or sequence of int
+        Seed of this model's training draws x(0) ~ N(0, I).
+    curve_x0 : ndarray (batch_v, N)
+        Initial conditions of the validation curve.
+    lr : float
+        Base learning rate (cosine-annealed to 0 over the run).
+    beta : float
+        Weight of the l1 penalty beta * sum |S_ij|.
+    penalty : tuple of 4 floats
+        Weights of the plain Frobenius norms of (S, F, W, G) in the loss.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+    P: np.ndarray
+    trace_P: float
+    S0: np.ndarray
+    mask: np.ndarray
+    F0: np.ndarray
+    W0: np.ndarray
+    G0: np.ndarray
+    data_seed: object
+    curve_x0: np.ndarray
+    lr: float = 0.02
+    beta: float = 0.0
+    penalty: tuple = (2.0, 2.0, 0.0, 2.0)
+
+
+@dataclass
+class TrainResult:
+    """Final parameters and history of one model of a stack."""
+
+    S: np.ndarray
+    F: np.ndarray
+    W: np.ndarray
+    G: np.ndarray
+    status: str  # "ok" or "diverged"
+    diverged_at: int | None
+    curve_step: list = field(default_factory=list)
+    curve_cost: list = field(default_factory=list)
+    final_loss: float = float("nan")
+
+    @property
+    def final_curve_cost(self) -> float:
+        return self.curve_cost[-1] if self.curve_cost else float("nan")
+
+
+class BatchedAdam:
+    """Adam (torch's formulas) over stacked parameters, one learning rate per model.
+
+    ``params`` is a list of tensors whose first axis is the model axis.
+    ``weight_decay`` is coupled L2 (added to the gradient, as torch.optim.Adam does).
+    """
+
+    def __init__(self, params, *, betas=(0.9, 0.999), eps=1e-8, weight_decay=0.0):
+        self.params = params
+        self.beta1, self.beta2 = betas
+        self.eps = eps
+        self.weight_decay = weight_decay
+        self.m = [torch.zeros_like(p) for p in params]
+        self.v = [torch.zeros_like(p) for p in params]
+        self.t = 0
+
+    def step(self, grads, lr: torch.Tensor) -> None:
+        """One update; ``lr`` has shape (M,) (0 freezes a model)."""
+        self.t += 1
+        bc1 = 1.0 - self.beta1**self.t
+        bc2 = 1.0 - self.beta2**self.t
+        for p, g, m, v in zip(self.params, grads, self.m, self.v):
+            if self.weight_decay:
+                g = g.add(p, alpha=self.weight_decay)
+            m.lerp_(g, 1.0 - self.beta1)
+            v.mul_(self.beta2).addcmul_(g, g, value=1.0 - self.beta2)
+            denom = (v.sqrt() / math.sqrt(bc2)).add_(self.eps)
+            step = (lr / bc1).view((-1,) + (1,) * (p.dim() - 1))
+            p.addcmul_(m / denom, step, value=-1.0)
+
+
+def clip_coefficients(grads, max_norm: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-model total gradient norm and torch's clip_grad_norm_ coefficient."""
+    sq = sum(g.reshape(g.shape[0], -1).pow(2).sum(1) for g in grads)
+    norm = sq.sqrt()
+    coef = (max_norm / (norm + 1e-6)).clamp(max=1.0)
+    return norm, coef
+
+
+class _Problem:
+    """Stacked plant and cost tensors."""
+
+    def __init__(self, specs, dtype):
+        def stack(name):
+            return torch.tensor(np.stack([getattr(s, name) for s in specs]), dtype=dtype)
+
+        self.A, self.B = stack("A"), stack("B")
+        self.At = self.A.transpose(1, 2).contiguous()
+        self.Bt = self.B.transpose(1, 2).contiguous()
+        self.Q, self.R, self.P = stack("Q"), stack("R"), stack("P")
+        self.Qt = self.Q.transpose(1, 2).contiguous()
+        self.Rt = self.R.transpose(1, 2).contiguous()
+        self.Pt = self.P.transpose(1, 2).contiguous()
+        n = self.A.shape[1]
+        eye = torch.eye(n, dtype=dtype)
+        # Q = R = I in the paper's family: skip those products.
+        self.Q_identity = bool(torch.all(self.Q == eye))
+        self.R_identity = bool(torch.all(self.R == eye))
+        self.trace_P = torch.tensor([s.trace_P for s in specs], dtype=dtype)
+
+
+class _Workspace:
+    """Buffers reused across training steps (fresh 1 MB tensors every op cost page faults)."""
+
+    def __init__(self, M, N, Bsz, h, horizon, dtype, keep: bool):
+        T = horizon
+        self.shape = (M, N, Bsz, h)
+        self.X = torch.empty(T + 1, M, Bsz, N, dtype=dtype)
+        self.U = torch.empty(T, M, Bsz, N, dtype=dtype)
+        depth = T if keep else 2
+        self.Zs = torch.empty(depth, M, h, Bsz, N, dtype=dtype)
+        self.Ys = torch.empty(depth, M, h, Bsz, N, dtype=dtype)
+        self.keep = keep
+        self.J = torch.empty(M, 1, 1, dtype=dtype)
+        self.PxT = torch.empty(M, Bsz, N, dtype=dtype)
+        if keep:
+            self.QX = torch.empty(T, M, Bsz, N, dtype=dtype)
+            self.RU = torch.empty(T, M, Bsz, N, dtype=dtype)
+            self.du = torch.empty(M, Bsz, N, dtype=dtype)
+            self.lam = [torch.empty(M, Bsz, N, dtype=dtype) for _ in range(2)]
+            self.dZ, self.dZn, self.tmp, self.dPre, self.dY = (
+                torch.empty(M, h, Bsz, N, dtype=dtype) for _ in range(5)
+            )
+
+
+def _forward(prob, S, F, W, G, x0, horizon: int, ws: _Workspace) -> torch.Tensor:
+    """Roll the stack out from x0 (M, B, N) into the workspace; J (M,) summed over the batch.
+
+    Node signals are row vectors here (nodes on the last axis), so ``S Z`` is
+    ``Z S'`` and ``Z W`` acts on the feature axis: both are single batched
+    matmuls with wide operands, which BLAS runs far faster than the tall-thin
+    (N B, h) x (h, h) products of the node-major layout.
+    """
+    M, N, Bsz, h = ws.shape
+    BN, hB = Bsz * N, h * Bsz
+    Fb = F.view(M, h, 1, 1)
+    Gr = G.view(M, 1, h)
+    Wt = W.transpose(1, 2)
+    St = S.transpose(1, 2)
+    X, U, J = ws.X, ws.U, ws.J
+    X[0].copy_(x0)
+    J.zero_()
+    for t in range(horizon):
+        x = X[t]
+        slot = t if ws.keep else t % 2
+        Z = ws.Zs[slot]
+        if t == 0:
+            torch.mul(x.unsqueeze(1), Fb, out=Z)
+        else:
+            Zprev = ws.Zs[slot - 1] if ws.keep else ws.Zs[1 - slot]
+            Y = ws.Ys[slot]
+            torch.bmm(Wt, Zprev.view(M, h, BN), out=Y.view(M, h, BN))  # (Z W) on features
+            torch.bmm(Y.view(M, hB, N), St, out=Z.view(M, hB, N))  # S (.) on nodes
+            Z.addcmul_(x.unsqueeze(1), Fb)
+        _tanh_(Z)
+        u = U[t]
+        torch.bmm(Gr, Z.view(M, h, BN), out=u.view(M, 1, BN))
+        torch.bmm(x, prob.At, out=X[t + 1])
+        X[t + 1].baddbmm_(u, prob.Bt)
+        if prob.Q_identity:
+            J.baddbmm_(x.view(M, 1, BN), x.view(M, BN, 1))
+        else:
+            qx = ws.QX[t] if ws.keep else ws.PxT
+            torch.bmm(x, prob.Qt, out=qx)
+            J.baddbmm_(x.view(M, 1, BN), qx.view(M, BN, 1))
+        if prob.R_identity:
+            J.baddbmm_(u.view(M, 1, BN), u.view(M, BN, 1))
+        else:
+            ru = ws.RU[t] if ws.keep else ws.PxT
+            torch.bmm(u, prob.Rt, out=ru)
+            J.baddbmm_(u.view(M, 1, BN), ru.view(M, BN, 1))
+    xT = X[horizon]
+    torch.bmm(xT, prob.Pt, out=ws.PxT)
+    J.baddbmm_(xT.view(M, 1, BN), ws.PxT.view(M, BN, 1))
+    return J.view(M).clone()
+
+
+def _norm(p):
+    return p.reshape(p.shape[0], -1).norm(dim=1)
+
+
+def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None):
+    """Per-model loss and its gradient with respect to (S, F, W, G), by hand-written BPTT.
+
+    Parameters
+    ----------
+    prob : _Problem
+    S, F, W, G : Tensor
+        Shapes (M, N, N), (M, h), (M, h, h), (M, h).
+    x0 : Tensor (M, B, N)
+        Initial conditions, one row per trajectory.
+    penalty : Tensor (M, 4)
+        Frobenius-norm weights of (S, F, W, G).
+    beta : Tensor (M,)
+        l1 weights on S.
+    ws : _Workspace, optional
+        Reusable buffers (made here if not given).
+
+    Returns
+    -------
+    loss : Tensor (M,)
+        mean_batch J + sum_k penalty_k ||param_k||_F + beta sum |S|.
+    grads : list of Tensor
+        dS, dF, dW, dG (dS unmasked).
+    """
+    M, Bsz, N = x0.shape
+    h = F.shape[1]
+    if ws is None:
+        ws = _Workspace(M, N, Bsz, h, horizon, S.dtype, keep=True)
+    BN, hB = Bsz * N, h * Bsz
+    J = _forward(prob, S, F, W, G, x0, horizon, ws)
+    X, U, Zs, Ys = ws.X, ws.U, ws.Zs, ws.Ys
+    QX = X if prob.Q_identity else ws.QX
+    RU = U if prob.R_identity else ws.RU
+    c2 = 2.0 / Bsz
+    Gc = G.view(M, h, 1)
+    Fr = F.view(M, 1, h)
+    dS = torch.zeros_like(S)
+    # dF, dG accumulate as row vectors: (1, BN) x (BN, h) runs ~6x faster than (h, BN) x (BN, 1).
+    dF = torch.zeros(M, 1, h, dtype=S.dtype)
+    dWt = torch.zeros_like(W)
+    dG = torch.zeros(M, 1, h, dtype=S.dtype)
+    lam, lam_next = ws.lam
+    torch.mul(ws.PxT, c2, out=lam)
+    du, dZ, dZn, tmp, dPre, dY = ws.du, ws.dZ, ws.dZn, ws.tmp, ws.dPre, ws.dY
+    dPre_h = dPre.view(M, h, BN)
+    for t in range(horizon - 1, -1, -1):
+        torch.baddbmm(RU[t], lam, prob.B, beta=c2, out=du)  # d/du of x' = x A' + u B'
+        Zn = Zs[t]  # Z(t+1)
+        if t == horizon - 1:
+            torch.bmm(Gc, du.view(M, 1, BN), out=dZn.view(M, h, BN))
+        else:
+            torch.baddbmm(dZ.view(M, h, BN), Gc, du.view(M, 1, BN), out=dZn.view(M, h, BN))
+        dG.baddbmm_(du.view(M, 1, BN), Zn.view(M, h, BN).transpose(1, 2))
+        torch.mul(dZn, Zn, out=tmp)
+        torch.addcmul(dZn, tmp, Zn, value=-1.0, out=dPre)  # dZn * (1 - Zn^2)
+        dF.baddbmm_(X[t].view(M, 1, BN), dPre_h.transpose(1, 2))
+        if t == 0:
+            break
+        dS.baddbmm_(dPre.view(M, hB, N).transpose(1, 2), Ys[t].view(M, hB, N))
+        torch.bmm(dPre.view(M, hB, N), S, out=dY.view(M, hB, N))
+        dWt.baddbmm_(dY.view(M, h, BN), Zs[t - 1].view(M, h, BN).transpose(1, 2))
+        torch.bmm(W, dY.view(M, h, BN), out=dZ.view(M, h, BN))
+        torch.baddbmm(QX[t], lam, prob.A, beta=c2, out=lam_next)
+        lam_next.view(M, 1, BN).baddbmm_(Fr, dPre_h)
+        lam, lam_next = lam_next, lam
+    dF = dF.view(M, h)
+    dG = dG.view(M, h)
+    dW = dWt.transpose(1, 2)
+    loss = J / Bsz + beta * S.abs().sum((1, 2))
+    grads = [dS, dF, dW, dG]
+    for k, p in enumerate((S, F, W, G)):
+        weight = penalty[:, k]
+        norm = _norm(p)
+        loss = loss + weight * norm
+        scale = torch.where(norm > 0, weight / norm.clamp_min(1e-300), torch.zeros_like(norm))
+        grads[k] = grads[k] + scale.view((-1,) + (1,) * (p.dim() - 1)) * p
+    grads[0] = grads[0] + beta.view(-1, 1, 1) * torch.sign(S)
+    return loss, grads
+
+
+def loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon):
+    """The same per-model loss with torch.tanh, node-major and autograd-friendly (test reference).
+
+    ``x0`` has shape (M, B, N) as in :func:`grnn_loss_and_grad`.
+    """
+    x = x0.transpose(1, 2)
+    M, N, Bsz = x.shape
+    h = F.shape[1]
+    Z = torch.zeros(M, N, Bsz, h, dtype=x0.dtype)
+    J = torch.zeros(M, dtype=x0.dtype)
+    for _ in range(horizon):
+        SZ = torch.einsum("mij,mjbk->mibk", S, Z)
+        Z = torch.tanh(torch.einsum("mibk,mkl->mibl", SZ, W) + x.unsqueeze(-1) * F.view(M, 1, 1, h))
+        u = torch.einsum("mibk,mk->mib", Z, G)
+        J = J + torch.einsum("mib,mij,mjb->m", x, prob.Q, x) + torch.einsum("mib,mij,mjb->m", u, prob.R, u)
+        x = torch.einsum("mij,mjb->mib", prob.A, x) + torch.einsum("mij,mjb->mib", prob.B, u)
+    J = J + torch.einsum("mib,mij,mjb->m", x, prob.P, x)
+    loss = J / Bsz + beta * S.abs().sum((1, 2))
+    for k, p in enumerate((S, F, W, G)):
+        loss = loss + penalty[:, k] * _norm(p)
+    return loss
+
+
+@torch.no_grad()
+def rollout_cost(prob, S, F, W, G, x0, horizon, ws=None) -> torch.Tensor:
+    """Mean normalized cost per model on the initial conditions x0 (M, B, N)."""
+    M, Bsz, N = x0.shape
+    if ws is None:
+        ws = _Workspace(M, N, Bsz, F.shape[1], horizon, S.dtype, keep=False)
+    J = _forward(prob, S, F, W, G, x0, horizon, ws)
+    return J / Bsz / prob.trace_P
+
+
+def _cosine(k: int, steps: int) -> float:
+    return 0.5 * (1.0 + math.cos(math.pi * k / steps))
+
+
+@torch.no_grad()
+def train_stack(
+    specs: list[ModelSpec],
+    *,
+    steps: int = 750,
+    batch: int = 20,
+    horizon: int = 50,
+    clip: float = 10.0,
+    curve_every: int = 10,
+    dtype: str = "float64",
+) -> list[TrainResult]:
+    """Train the models of ``specs`` together; one :class:`TrainResult` per spec.
+
+    Each model: Adam with its own learning rate cosine-annealed to zero over
+    ``steps`` updates, a fresh batch of ``batch`` draws x(0) ~ N(0, I) per update
+    from its own ``data_seed``, full BPTT over ``horizon`` steps, gradient-norm
+    clipping at ``clip`` (``None`` or 0 disables it). A model whose loss or
+    gradient stops being finite is frozen and reported ``diverged``; the others
+    go on. The validation curve (mean normalized cost on ``spec.curve_x0``) is
+    recorded every ``curve_every`` updates and after the last one.
+    """
+    if dtype not in DTYPES:
+        raise ValueError(f"dtype must be one of {sorted(DTYPES)}, got {dtype!r}")
+    if steps < 1 or batch < 1:
+        raise ValueError(f"steps and batch must be positive, got steps={steps}, batch={batch}")
+    tdt = DTYPES[dtype]
+    M = len(specs)
+    if M == 0:
+        return []
+    N = specs[0].A.shape[0]
+    prob = _Problem(specs, tdt)
+
+    def stack(name):
+        return torch.tensor(np.stack([np.asarray(getattr(s, name), dtype=float) for s in specs]), dtype=tdt)
+
+    S, F, W, G = stack("S0"), stack("F0"), stack("W0"), stack("G0")
+    mask = torch.tensor(np.stack([np.asarray(s.mask, dtype=bool) for s in specs]))
+    maskf = mask.to(tdt)
+    # A model with an empty mask keeps S frozen at S0; the others start on their support.
+    frozen = ~mask.any(dim=(1, 2))
+    S.mul_(torch.where(frozen.view(M, 1, 1), torch.ones_like(maskf), maskf))
+    penalty = torch.tensor([s.penalty for s in specs], dtype=tdt)
+    beta = torch.tensor([s.beta for s in specs], dtype=tdt)
+    base_lr = torch.tensor([s.lr for s in specs], dtype=tdt)
+    alive = torch.ones(M, dtype=torch.bool)
+    diverged_at: list[int | None] = [None] * M
+    rngs = [np.random.default_rng(s.data_seed) for s in specs]
+    curve_x0 = torch.tensor(np.stack([np.asarray(s.curve_x0) for s in specs]), dtype=tdt)
+    params = [S, F, W, G]
+    adam = BatchedAdam(params)
+    curve_steps: list[int] = []
+    curve_costs: list[torch.Tensor] = []
+    last_loss = torch.full((M,), float("nan"), dtype=tdt)
+
+    h = F.shape[1]
+    ws_train = _Workspace(M, N, batch, h, horizon, tdt, keep=True)
+    ws_curve = _Workspace(M, N, curve_x0.shape[1], h, horizon, tdt, keep=False)
+
+    def record(k):
+        curve_steps.append(k)
+        curve_costs.append(rollout_cost(prob, S, F, W, G, curve_x0, horizon, ws_curve))
+
+    for k in range(steps):
+        if curve_every and k % curve_every == 0:
+            record(k)
+        x0 = torch.tensor(np.stack([rng.standard_normal((batch, N)) for rng in rngs]), dtype=tdt)
+        x0.mul_(alive.view(M, 1, 1).to(tdt))
+        loss, grads = grnn_loss_and_grad(
+            prob, S, F, W, G, x0, penalty=penalty, beta=beta, horizon=horizon, ws=ws_train
+        )
+        grads[0].mul_(maskf)
+        norm, coef = clip_coefficients(grads, clip if clip else float("inf"))
+        bad = alive & ~(torch.isfinite(loss) & torch.isfinite(norm))
+        if bool(bad.any()):
+            for m in torch.nonzero(bad).flatten().tolist():
+                diverged_at[m] = k
+            alive &= ~bad
+            for p in params:  # a dead model rolls out zeros from now on
+                p.copy_(torch.where(alive.view((-1,) + (1,) * (p.dim() - 1)), p, torch.zeros_like(p)))
+            grads = [torch.nan_to_num(g, nan=0.0, posinf=0.0, neginf=0.0) for g in grads]
+            coef = torch.where(alive, torch.nan_to_num(coef, nan=0.0), torch.zeros_like(coef))
+        last_loss = torch.where(alive, loss, last_loss)
+        if clip:
+            for g in grads:
+                g.mul_(coef.view((-1,) + (1,) * (g.dim() - 1)))
+        lr = base_lr * _cosine(k, steps) * alive.to(tdt)
+        adam.step(grads, lr)  # masked gradients keep S exactly zero (or frozen) off the support
+    record(steps)
+
+    costs = torch.stack(curve_costs).numpy()  # (points, M)
+    results = []
+    for m in range(M):
+        status = "ok" if bool(alive[m]) else "diverged"
+        results.append(
+            TrainResult(
+                S=S[m].numpy().astype(float),
+                F=F[m].numpy().astype(float),
+                W=W[m].numpy().astype(float),
+                G=G[m].numpy().astype(float),
+                status=status,
+                diverged_at=diverged_at[m],
+                curve_step=list(curve_steps),
+                curve_cost=[float(c) for c in costs[:, m]],
+                final_loss=float(last_loss[m]),
+            )
+        )
+    return results

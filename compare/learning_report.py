@@ -1,0 +1,172 @@
+"""Paper Table 1 and the training-curve figure (paper Fig. 2) from stored records.
+
+``records`` are dicts with keys ``instance`` (dict with ``a_norm``, ``seed``, ...),
+``label``, ``method``, ``params``, ``cost``, ``cost_stderr``, ``links``,
+``self_loops``, ``info_model``, ``status`` and ``extras`` (where learned
+controllers keep ``extras["curve"] = {"step": [...], "cost": [...]}``).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+
+import numpy as np
+
+__all__ = ["table1_markdown", "training_curves_figure", "PAPER_TABLE1", "PAPER_SPARSE_EDGES"]
+
+#: Paper Table 1 (DESIGN.md Sec. 7): median normalized cost over 50 instances; autonomous is a mean.
+PAPER_TABLE1 = {
+    "autonomous": {0.995: 2.534, 1.05: 69.294},
+    "grnn": {0.995: 1.112, 1.05: 1.153},
+    "grnn_dense": {0.995: 1.091, 1.05: 1.110},
+    "grnn_sparse": {0.995: 1.093, 1.05: 1.124},
+    "grnn_fixed": {0.995: 1.267, 1.05: 2.210},
+    "gcnn": {0.995: 1.212, 1.05: 1.715},
+}
+#: GRNN-Sparse's mean edge count in the paper, self-loops included (its convention).
+PAPER_SPARSE_EDGES = {0.995: 53.4, 1.05: 56.1}
+
+_ROW_ORDER = ["lqr", "autonomous", "grnn", "grnn_dense", "grnn_sparse", "grnn_fixed", "gcnn"]
+
+
+def _extras(record) -> dict:
+    extras = record.get("extras") or {}
+    return json.loads(extras) if isinstance(extras, str) else extras
+
+
+def _a_norm(record) -> float:
+    instance = record.get("instance") or {}
+    if isinstance(instance, str):
+        instance = json.loads(instance)
+    return float(instance.get("a_norm", float("nan")))
+
+
+def _ok(record) -> bool:
+    return record.get("status") in ("optimal", "inaccurate") and np.isfinite(record.get("cost", np.nan))
+
+
+def _fmt(value, digits=3) -> str:
+    return "–" if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
+
+
+def table1_markdown(records) -> str:
+    """Markdown Table 1: our statistic per (method, ||A||) beside the paper's value.
+
+    Costs are medians over instances (autonomous: the mean, as in the paper);
+    failed designs are left out of the statistic and counted in the ``ok``
+    column. Links are means over instances: directed off-diagonal links, and in
+    parentheses with self-loops (the paper's edge convention).
+    """
+    groups: dict[tuple, list] = defaultdict(list)
+    for record in records:
+        groups[(record.get("method"), record.get("label") or record.get("method"))].append(record)
+    a_norms = sorted({_a_norm(r) for r in records if np.isfinite(_a_norm(r))})
+    if not groups or not a_norms:
+        return "_No records for Table 1._\n"
+
+    def order(key):
+        method, label = key
+        return (_ROW_ORDER.index(method) if method in _ROW_ORDER else len(_ROW_ORDER), label)
+
+    header = ["Method"]
+    for a in a_norms:
+        header += [f"‖A‖={a:g} ours", "paper", "Δ", "ok", "links (w/ self-loops)"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    notes = []
+    for method, label in sorted(groups, key=order):
+        rows = groups[(method, label)]
+        cells = [label]
+        for a in a_norms:
+            here = [r for r in rows if _a_norm(r) == a]
+            good = [r for r in here if _ok(r)]
+            costs = np.array([r["cost"] for r in good], dtype=float)
+            if method == "autonomous":
+                stat = float(costs.mean()) if costs.size else float("nan")
+            else:
+                stat = float(np.median(costs)) if costs.size else float("nan")
+            paper = PAPER_TABLE1.get(method, {}).get(a)
+            gap = f"{100 * (stat / paper - 1):+.1f} %" if paper and np.isfinite(stat) else "–"
+            links = np.array([r.get("links", np.nan) for r in good], dtype=float)
+            loops = np.array([r.get("self_loops", np.nan) for r in good], dtype=float)
+            if links.size:
+                link_cell = f"{links.mean():.1f} ({(links + loops).mean():.1f})"
+            else:
+                link_cell = "–"
+            if method == "grnn_sparse" and a in PAPER_SPARSE_EDGES:
+                link_cell += f"; paper ({PAPER_SPARSE_EDGES[a]:.1f})"
+            cells += [_fmt(stat), _fmt(paper) if paper else "–", gap, f"{len(good)}/{len(here)}", link_cell]
+        lines.append("| " + " | ".join(cells) + " |")
+        if any(r.get("status") not in ("optimal", "inaccurate") for r in rows):
+            statuses = defaultdict(int)
+            for r in rows:
+                statuses[r.get("status")] += 1
+            notes.append(f"{label}: " + ", ".join(f"{v} {k}" for k, v in sorted(statuses.items())))
+    text = "\n".join(lines) + "\n"
+    text += ("\nCosts: E[J]/trace(P) on the 1000-draw validation set (medians over instances; "
+             "Autonomous: mean). Links: mean directed off-diagonal links; in parentheses with "
+             "self-loops, the convention of the paper's 53.4 / 56.1 for GRNN-Sparse.\n")
+    if notes:
+        text += "\nNon-optimal designs (left out of the statistics): " + "; ".join(notes) + "\n"
+    return text
+
+
+def training_curves_figure(records, ax=None):
+    """Median and quartiles of the validation cost against training step, per method (paper Fig. 2).
+
+    Parameters
+    ----------
+    records : list of dict
+        Records whose ``extras["curve"]`` holds ``step`` and ``cost`` lists;
+        others are ignored.
+    ax : matplotlib Axes or sequence of Axes, optional
+        One axis per ||A|| present (a single axis is fine with one ||A||; with
+        several, every curve goes on it with ||A|| in the legend). A new figure
+        with one panel per ||A|| is made when omitted.
+
+    Returns
+    -------
+    (fig, axes) : the figure and the list of axes drawn on (never shown).
+    """
+    import matplotlib.pyplot as plt
+
+    curves: dict[float, dict[str, list]] = defaultdict(lambda: defaultdict(list))
+    for record in records:
+        curve = _extras(record).get("curve")
+        if not curve or not _ok(record):
+            continue
+        curves[_a_norm(record)][record.get("label") or record.get("method")].append(curve)
+    a_norms = sorted(curves)
+    if ax is None:
+        fig, axes = plt.subplots(1, max(1, len(a_norms)), figsize=(6 * max(1, len(a_norms)), 4.2), squeeze=False)
+        axes = list(axes[0])
+    else:
+        axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
+        fig = axes[0].figure
+    if len(axes) not in (1, len(a_norms)) and a_norms:
+        raise ValueError(f"need one axis per a_norm ({len(a_norms)}) or a single axis, got {len(axes)}")
+    labels = sorted({label for by_label in curves.values() for label in by_label})
+    colors = {label: plt.cm.tab10(i % 10) for i, label in enumerate(labels)}
+    shared = len(axes) == 1 and len(a_norms) > 1
+    styles = ["-", "--", ":", "-."]
+    for i, a in enumerate(a_norms):
+        axis = axes[0] if shared else axes[i]
+        for label, items in sorted(curves[a].items()):
+            steps = items[0]["step"]
+            costs = np.array([c["cost"] for c in items if c["step"] == steps], dtype=float)
+            med = np.median(costs, axis=0)
+            lo, hi = np.quantile(costs, 0.25, axis=0), np.quantile(costs, 0.75, axis=0)
+            name = f"{label} (‖A‖={a:g})" if shared else label
+            style = styles[i % len(styles)] if shared else "-"
+            axis.plot(steps, med, style, color=colors[label], label=f"{name}, n={len(costs)}")
+            axis.fill_between(steps, lo, hi, color=colors[label], alpha=0.2, linewidth=0)
+        if not shared:
+            axis.set_title(f"‖A‖ = {a:g}")
+    for axis in axes[: (1 if shared else len(a_norms))]:
+        axis.set_yscale("log")
+        axis.set_xlabel("training step")
+        axis.set_ylabel("validation cost  E[J] / trace(P)")
+        axis.axhline(1.0, color="0.5", linewidth=0.8)
+        axis.grid(True, which="both", alpha=0.3)
+        axis.legend(fontsize=8)
+    return fig, axes

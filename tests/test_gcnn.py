@@ -1,0 +1,89 @@
+"""GCNN baseline (Gama & Sojoudi 2021) as the paper benchmarked it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from baselines import GCNNController, gcnn, gcnn_batch
+from codesign import controller_from_arrays, paper_instance, simulate
+from compare.registry import get_method
+
+
+@pytest.fixture(scope="module")
+def inst():
+    return paper_instance(2)
+
+
+def test_gcnn_has_192_parameters_and_reports_instantaneous_links(inst):
+    design = gcnn(inst, steps=20, ensemble=1, stability_steps=40)
+    assert design.controller.n_parameters == 192
+    assert design.extras["n_parameters"] == 192
+    assert design.controller.H.shape == (5, 32) and design.controller.w.shape == (32,)
+    assert design.info_model == "instantaneous"
+    assert design.links == int(np.sum(inst.comm_adj != 0)) - inst.n
+    assert design.status == "optimal" and design.cost_kind == "simulated" and design.cost_stderr > 0
+    curve = design.extras["curve"]
+    assert curve["step"] == [0, 10, 20] and curve["cost"][-1] < curve["cost"][0]
+
+
+def test_gcnn_controller_is_the_filter_bank(inst):
+    rng = np.random.default_rng(0)
+    H, w = rng.standard_normal((5, 32)) / 3, rng.standard_normal(32) / 6
+    c = GCNNController(inst.gso, H, w)
+    x = rng.standard_normal((3, inst.n))
+    z = sum(np.einsum("ij,bj->bi", np.linalg.matrix_power(inst.gso, k), x)[:, :, None] * H[k] for k in range(5))
+    u, _ = c.step(None, x)
+    np.testing.assert_allclose(u, np.tanh(z) @ w, atol=1e-13)
+    # Linearization at the origin: small signals see the gain sum_k (H_k . w) S^k.
+    small = 1e-8 * x
+    np.testing.assert_allclose(c.step(None, small)[0], small @ c.linear_gain().T, rtol=1e-6, atol=1e-20)
+    again = controller_from_arrays("gcnn", c.arrays())
+    assert simulate(inst, again).cost == simulate(inst, c).cost
+
+
+def test_stacked_gcnn_equals_single_runs(inst):
+    other = paper_instance(5, a_norm=1.05)
+    together = gcnn_batch([(inst, {"steps": 8, "ensemble": 1, "stability_steps": 0, "seed": 1}),
+                           (other, {"steps": 8, "ensemble": 1, "stability_steps": 0, "seed": 2})])
+    alone = gcnn(other, steps=8, ensemble=1, stability_steps=0, seed=2)
+    np.testing.assert_allclose(together[1].controller.H, alone.controller.H, rtol=1e-9, atol=1e-13)
+    assert together[1].params == alone.params == {"seed": 2, "steps": 8, "ensemble": 1, "stability_steps": 0}
+
+
+def test_registered_with_batch_hook(inst):
+    method = get_method("gcnn")
+    assert method.label == "GCNN"
+    out = method.func.batch([(inst, {"steps": 4, "ensemble": 1, "stability_steps": 0})])
+    assert len(out) == 1 and out[0][0].method == "gcnn"
+
+
+def test_bad_input_raises(inst):
+    with pytest.raises(ValueError, match="steps"):
+        gcnn(inst, steps=0)
+    with pytest.raises(ValueError, match="decay"):
+        gcnn(inst, decay=1.5)
+
+
+def test_hand_written_bptt_matches_autograd(inst):
+    import torch
+
+    gm = __import__("sys").modules["baselines.gcnn"]
+    insts = [inst, paper_instance(6, a_norm=1.05)]
+    rng = np.random.default_rng(3)
+
+    def stack(arrays):
+        return torch.tensor(np.stack(arrays))
+
+    S, A_t, B_t, P = (stack([getattr(i, k) if k != "A" else i.A for i in insts]) for k in ("gso", "A", "B", "P"))
+    A_t, B_t = A_t.transpose(1, 2).contiguous(), B_t.transpose(1, 2).contiguous()
+    H = torch.tensor(rng.standard_normal((2, 5, 32)) / 3)
+    w = torch.tensor(rng.standard_normal((2, 32)) / 6)
+    x0 = torch.tensor(rng.standard_normal((2, 7, inst.n)))
+    Hl, wl = H.clone().requires_grad_(True), w.clone().requires_grad_(True)
+    reference = gm._cost(S, Hl, wl, A_t, B_t, P, x0, inst.horizon) / 7
+    reference.sum().backward()
+    loss, (dH, dw) = gm._loss_and_grad(S, H, w, A_t, B_t, P, x0, inst.horizon)
+    np.testing.assert_allclose(loss.numpy(), reference.detach().numpy(), rtol=1e-12)
+    np.testing.assert_allclose(dH.numpy(), Hl.grad.numpy(), rtol=0, atol=1e-11 * Hl.grad.abs().max().item())
+    np.testing.assert_allclose(dw.numpy(), wl.grad.numpy(), rtol=0, atol=1e-11 * wl.grad.abs().max().item())

@@ -1,0 +1,53 @@
+"""Table 1 and training-curve figure from records."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np  # noqa: E402
+
+from compare.learning_report import PAPER_TABLE1, table1_markdown, training_curves_figure  # noqa: E402
+
+
+def _records():
+    rng = np.random.default_rng(0)
+    out = []
+    for a in (0.995, 1.05):
+        for seed in range(5):
+            inst = {"family": "paper", "seed": seed, "n": 20, "a_norm": a}
+            for method, label in (("grnn", "GRNN"), ("grnn_sparse", "GRNN-Sparse"), ("autonomous", "Autonomous")):
+                cost = 1.1 + 0.01 * seed if method != "autonomous" else 2.0 + seed
+                out.append(dict(instance=inst, label=label, method=method, params={}, cost=cost,
+                                cost_stderr=0.01, links=40 + seed, self_loops=10, info_model="delayed",
+                                status="optimal",
+                                extras={"curve": {"step": [0, 10, 20], "cost": list(100 * rng.random(3) + 1)}}))
+    out.append(dict(out[0], status="diverged", cost=float("nan")))
+    return out
+
+
+def test_table1_statistics_and_paper_values():
+    text = table1_markdown(_records())
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
+    grnn = [c.strip() for c in rows["GRNN"].split("|")[1:-1]]
+    assert grnn[1] == "1.120"  # median of 1.10..1.14
+    assert grnn[2] == f"{PAPER_TABLE1['grnn'][0.995]:.3f}"
+    assert grnn[4] == "5/6"  # the diverged record is counted, not used
+    auto = [c.strip() for c in rows["Autonomous"].split("|")[1:-1]]
+    assert auto[1] == "4.000"  # a mean, not a median
+    sparse = [c.strip() for c in rows["GRNN-Sparse"].split("|")[1:-1]]
+    assert sparse[5].startswith("42.0 (52.0)") and "53.4" in sparse[5]
+    assert "1 diverged" in text
+
+
+def test_training_curves_figure_returns_handles():
+    fig, axes = training_curves_figure(_records())
+    assert len(axes) == 2
+    assert len(axes[0].lines) >= 3
+    import matplotlib.pyplot as plt
+
+    fig2, ax = plt.subplots()
+    _, one = training_curves_figure(_records(), ax=ax)
+    assert one == [ax] and len(ax.lines) >= 6
+    plt.close("all")

@@ -4,6 +4,7 @@ Public names::
 
     from baselines import lqr, autonomous, decentralized, polish_gain
     from baselines import sls, sls_topologies, is_quadratically_invariant
+    from baselines import sparse_admm, sparse_sdp, truncated_lqr
     from baselines import gcnn, gcnn_batch, GCNNController
 """
 
@@ -12,6 +13,9 @@ from .lqr import autonomous, decentralized, lqr
 from .polish import PolishResult, polish_gain
 from .qi import QIResult, is_quadratically_invariant
 from .sls import TOPOLOGY_FAMILY, SLSController, sls, sls_topologies, topology
+from .sparse_admm import ADMM_GAMMAS, sparse_admm
+from .sparse_sdp import SDP_GAMMAS, SparseSDP, sparse_sdp
+from .truncation import truncated_lqr
 
 __all__ = [
     "lqr",
@@ -26,6 +30,12 @@ __all__ = [
     "TOPOLOGY_FAMILY",
     "is_quadratically_invariant",
     "QIResult",
+    "sparse_admm",
+    "ADMM_GAMMAS",
+    "sparse_sdp",
+    "SparseSDP",
+    "SDP_GAMMAS",
+    "truncated_lqr",
     "gcnn",
     "gcnn_batch",
     "GCNNController",

@@ -41,7 +41,8 @@ def _write_report(store, out: Path) -> dict:
     commands = [v for k, v in sorted(meta.items()) if k.startswith("command:")]
     commands.append(f"compare report --out {out}")
     title = "Comparison report: " + ", ".join(sorted(specs)) if specs else "Comparison report"
-    return write_report(store.records(), out, specs=specs, title=title, commands=commands)
+    return write_report(store.records(), out, specs=specs, title=title, commands=commands,
+                        load_controller=store.controller)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})

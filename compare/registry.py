@@ -135,6 +135,9 @@ register("autonomous", baselines.autonomous, label="Autonomous (u = 0)")
 register("decentralized", baselines.decentralized, label="Decentralized (diagonal K)")
 register("sls", baselines.sls, label="SLS (delay constraints)")
 register("sls_topologies", baselines.sls_topologies, label="SLS (topology family)")
+register("sparse_admm", baselines.sparse_admm, label="Sparse K (l1 ADMM)")
+register("sparse_sdp", baselines.sparse_sdp, label="Sparse K (l1 SDP)")
+register("truncated_lqr", baselines.truncated_lqr, label="Truncated LQR K")
 for _name, _variant, _label in (("grnn", "given", "GRNN"), ("grnn_dense", "dense", "GRNN-Dense"),
                                  ("grnn_fixed", "fixed", "GRNN-Fixed"), ("grnn_sparse", "sparse", "GRNN-Sparse")):
     _func = codesign.grnn_method(_variant)

@@ -339,8 +339,55 @@ def _write_csv(records: list[dict], path: Path) -> None:
             writer.writerow(row)
 
 
+def _save_figure(fig, out: Path, stem: str, files: dict) -> None:
+    with plt.rc_context({"svg.hashsalt": "compare-report", "svg.fonttype": "path"}):
+        files[f"{stem}.png"] = out / f"{stem}.png"
+        files[f"{stem}.svg"] = out / f"{stem}.svg"
+        fig.savefig(files[f"{stem}.png"], dpi=130, bbox_inches="tight", metadata={"Software": None})
+        fig.savefig(files[f"{stem}.svg"], bbox_inches="tight", metadata={"Date": None, "Creator": None})
+    plt.close(fig)
+
+
+def _learning_sections(records: list[dict], out: Path, files: dict, load_controller) -> list[str]:
+    """Table 1 and training curves (from Table 1 experiments), and the topology path figure."""
+    from .learning_report import table1_markdown, training_curves_figure
+    from .topologies import plot_topology_path, topology_path_records
+
+    lines = []
+    table1 = [r for r in records if r.get("experiment", "").startswith("table1")]
+    if table1:
+        names = ", ".join(sorted({r["experiment"] for r in table1}))
+        lines += ["## Table 1 (paper §IV-A)", "", f"From experiment {names}.", "", table1_markdown(table1), ""]
+        if any("curve" in r["extras"] for r in table1):
+            fig, _ = training_curves_figure(table1)
+            _save_figure(fig, out, "training_curves", files)
+            lines += ["### Training curves (paper Fig. 2)", "",
+                      "Median and 25–75 % band over instances of the selection-set cost during training.", "",
+                      "![training curves](training_curves.png)", ""]
+    path = topology_path_records(records)
+    if len(path) >= 2 and load_controller is not None:
+        from codesign import paper_instance
+
+        spec = {k: v for k, v in path[0]["instance"].items() if k != "family"}
+        entries = []
+        for r in path:
+            controller = load_controller(r["run_key"], r["idx"])
+            support = getattr(controller, "support", None)
+            if support is not None:
+                entries.append((r["params"]["beta"], r["links"], r["cost"], support))
+        if len(entries) >= 2:
+            fig, _ = plot_topology_path(paper_instance(**spec), entries)
+            _save_figure(fig, out, "topologies", files)
+            inst = ", ".join(f"{k} = {v}" for k, v in spec.items())
+            lines += ["## Designed topologies along the β path (paper Fig. 4)", "",
+                      f"GRNN-Sparse on one instance ({inst}); nodes coloured by the magnitude of the leading "
+                      "eigenvector of A. Under each graph: the ℓ1 weight β, the directed off-diagonal links "
+                      "|E| and the normalized cost J.", "", "![designed topologies](topologies.png)", ""]
+    return lines
+
+
 def write_report(records: list[dict], out, *, specs: dict | None = None, title: str = "Comparison report",
-                 commands: list[str] | None = None) -> dict[str, Path]:
+                 commands: list[str] | None = None, load_controller=None) -> dict[str, Path]:
     """Write ``cost_vs_links.png/.svg``, ``runs.csv`` and ``report.md`` into ``out``.
 
     Parameters
@@ -354,6 +401,9 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     title : str
     commands : list of str, optional
         Commands that regenerate the report, shown at the top.
+    load_controller : callable, optional
+        ``(run_key, idx) -> controller`` (e.g. :meth:`Store.controller`), for the
+        designed-topology figure.
 
     Returns
     -------
@@ -366,13 +416,8 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     points = aggregate(records)
     boundaries = plant_links(records)
     files = {}
-    with plt.rc_context({"svg.hashsalt": "compare-report", "svg.fonttype": "path"}):
-        fig, _ = plot_cost_vs_links(points, boundaries=boundaries)
-        files["png"] = out / "cost_vs_links.png"
-        files["svg"] = out / "cost_vs_links.svg"
-        fig.savefig(files["png"], dpi=130, bbox_inches="tight", metadata={"Software": None})
-        fig.savefig(files["svg"], bbox_inches="tight", metadata={"Date": None, "Creator": None})
-        plt.close(fig)
+    fig, _ = plot_cost_vs_links(points, boundaries=boundaries)
+    _save_figure(fig, out, "cost_vs_links", files)
     files["csv"] = out / "runs.csv"
     _write_csv(records, files["csv"])
 
@@ -411,8 +456,10 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     lines += _pareto_tables(points)
     if boundaries:
         lines += ["The dotted vertical line in the figure is the median number of off-diagonal plant-graph "
-                  "links: below it no communication graph is quadratically invariant on this family, so no "
-                  "convex delay-constrained design exists there (DESIGN.md §5).", ""]
+                  "links: below it no communication graph relaying one hop per step is quadratically "
+                  "invariant on this family, so no convex delay-constrained design with the GRNN's "
+                  "information model exists there (DESIGN.md §5).", ""]
+    lines += _learning_sections(records, out, files, load_controller)
     lines += ["## Runs by status", "", "| status | designs |", "|---|---:|"]
     lines += [f"| {status} | {count} |" for status, count in sorted(statuses.items())]
     failures = [r for r in records if r["status"] != "optimal"]
@@ -421,9 +468,9 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         for r in failures[:20]:
             inst = ", ".join(f"{k}={v}" for k, v in r["instance"].items() if k != "family")
             lines.append(f"| {inst} | {r['label']} | {r['status']} | {r['message'][:160]} |")
-    lines += ["", "## Files", "", "- `cost_vs_links.png`, `cost_vs_links.svg`: the figure above",
-              "- `runs.csv`: every design of every run",
-              "- `report.html`: this page, self-contained", ""]
+    lines += ["", "## Files", ""]
+    lines += [f"- `{p.name}`" for key, p in sorted(files.items()) if key.endswith(".png") or key.endswith(".svg")]
+    lines += ["- `runs.csv`: every design of every run", "- `report.html`: this page, self-contained", ""]
     lines += ["## Software", "", "| package | version |", "|---|---|"]
     lines += [f"| {k} | {v} |" for k, v in software_versions().items()]
     for name, text in sorted((specs or {}).items()):

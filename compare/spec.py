@@ -25,6 +25,7 @@ their hyperparameters and grids, and evaluation settings. It expands into
     label = "Decentralized"
     params = { start = "lqr_diagonal" }
     grid = { }                   # lists of values, expanded as a cartesian product
+    where = { a_norm = [1.05] }  # optional: only on instances with these field values
 """
 
 from __future__ import annotations
@@ -61,6 +62,8 @@ class SpecError(ValueError):
     """A malformed experiment spec; the message names the offending key."""
 
 
+# Fields of one expanded instance, which a method entry's `where` may filter on.
+_INSTANCE_FIELDS = {"seed", "n", "degree", "a_norm", "b_norm", "hops", "horizon"}
 _FAMILY_KEYS = {"paper": {"family", "n", "a_norms", "seeds", "degree", "b_norm", "hops", "horizon"}}
 
 
@@ -98,12 +101,20 @@ class InstanceSpec:
 
 @dataclass(frozen=True)
 class MethodSpec:
-    """One ``[[methods]]`` entry: a registered method, its label, fixed params and grid."""
+    """One ``[[methods]]`` entry: a registered method, its label, fixed params and grid.
+
+    ``where`` restricts the entry to instances whose spec fields take the listed
+    values, e.g. ``{"a_norm": [1.05]}`` for a grid that suits one family only.
+    """
 
     method: str
     label: str
     params: dict = field(default_factory=dict)
     grid: dict = field(default_factory=dict)
+    where: dict = field(default_factory=dict)
+
+    def applies_to(self, instance: dict) -> bool:
+        return all(instance.get(key) in values for key, values in self.where.items())
 
     def expand(self) -> list[dict]:
         """Parameter dicts for every grid point (fixed params overlaid by grid values)."""
@@ -170,6 +181,7 @@ class ExperimentSpec:
             Run(instance, m.method, m.label, params, self.evaluation, version)
             for instance in self.instances.expand()
             for m in self.methods
+            if m.applies_to(instance)
             for params in m.expand()
         ]
 
@@ -297,7 +309,7 @@ def _parse_evaluation(table: dict) -> EvaluationSpec:
 def _parse_method(index: int, entry) -> MethodSpec:
     where = f"methods[{index}]"
     entry = _typed(where, entry, dict)
-    _check_keys(where, entry, {"method", "label", "params", "grid"})
+    _check_keys(where, entry, {"method", "label", "params", "grid", "where"})
     if "method" not in entry:
         raise SpecError(f"{where}.method: missing (which registered method to run)")
     name = _typed(f"{where}.method", entry["method"], str)
@@ -320,4 +332,10 @@ def _parse_method(index: int, entry) -> MethodSpec:
                 method.check_params({key: value}, f"{where}.grid")
     except ValueError as exc:
         raise SpecError(str(exc)) from None
-    return MethodSpec(name, label, dict(params), dict(grid))
+    filters = _typed(f"{where}.where", entry.get("where", {}), dict)
+    for key, values in filters.items():
+        if key not in _INSTANCE_FIELDS:
+            raise SpecError(f"{where}.where.{key}: unknown instance field (use a_norm, n, seed, degree, ...)")
+        if not isinstance(values, list) or not values:
+            raise SpecError(f"{where}.where.{key}: expected a non-empty list of values, got {values!r}")
+    return MethodSpec(name, label, dict(params), dict(grid), dict(filters))

@@ -44,3 +44,23 @@ def test_plant_boundary_and_plot_handles():
     fig, axes = plot_cost_vs_links(aggregate(records), boundaries=boundary)
     assert len(axes) == 1 and axes[0].get_xscale() == "symlog"
     assert np.isclose(axes[0].lines[-1].get_xdata()[0], links)
+
+
+def test_topology_path_picks_the_longest_path_and_draws_each_design():
+    from codesign import paper_instance
+    from compare.topologies import plot_topology_path, topology_path_records
+
+    records = []
+    for seed, betas in ((0, (0.1, 1.0)), (1, (0.1, 1.0, 10.0))):
+        inst = dict(INST[0], seed=seed, a_norm=1.1)
+        for beta in betas:
+            rec = _rec(inst, "GRNN-Sparse", 10, 1.2, params={"beta": beta})
+            rec["method"] = "grnn_sparse"
+            records.append(rec)
+    path = topology_path_records(records)
+    assert [r["params"]["beta"] for r in path] == [0.1, 1.0, 10.0]
+    assert all(r["instance"]["seed"] == 1 for r in path)
+    inst = paper_instance(1, n=8, degree=4, a_norm=1.1, horizon=10)
+    supports = [np.eye(8) + np.diag(np.ones(7), 1) * (k > 0) for k in range(3)]
+    fig, axes = plot_topology_path(inst, [(b, 7 * (k > 0), 1.2, s) for k, (b, s) in enumerate(zip((0.1, 1, 10), supports))])
+    assert len(axes) == 4 and axes[1].get_title().startswith("β = 0.1")

@@ -31,6 +31,14 @@ def test_parse_and_expand():
     assert runs[0].key != parse_spec(BASE).runs(version="other")[0].key
 
 
+def test_where_restricts_a_method_entry_to_matching_instances():
+    spec = parse_spec(BASE.replace('method = "lqr"', 'method = "lqr"\nwhere = { a_norm = [1.05] }'))
+    lqr_runs = [r for r in spec.runs() if r.method == "lqr"]
+    assert len(lqr_runs) == 2 and all(r.instance["a_norm"] == 1.05 for r in lqr_runs)
+    with pytest.raises(SpecError, match=r"methods\[0\]\.where\.colour: unknown instance field"):
+        parse_spec(BASE.replace('method = "lqr"', 'method = "lqr"\nwhere = { colour = [1] }'))
+
+
 def test_presets_ship_and_parse():
     assert "quick" in preset_names()
     for name in preset_names():

@@ -1,0 +1,318 @@
+"""Sparse static gains by ℓ1-regularized ADMM (Lin, Fardad & Jovanović 2013, "lqrsp").
+
+For each weight γ on an increasing grid, minimize
+
+    J(K) / trace(P) + γ Σ_{i≠j} w_ij |K_ij|,   J(K) = trace(P_K),   P_K = A_cl' P_K A_cl + Q + K'RK,
+
+over static gains (A_cl = A + BK here: this module uses the evaluator's sign,
+``u = K x``, where DESIGN.md §5 writes ``u = -Kx``; the ℓ1 term does not care and
+the gradient below carries the sign). x(0) ~ N(0, I) plays the role of B₁B₁'.
+γ is in units of the normalized cost (DESIGN.md's γ is this γ times trace(P),
+the LQR cost): one grid then suits every instance of the family, and a path's
+points line up across instances in a report.
+ADMM splits K = G:
+
+- K-step: minimize J(K) + (ρ/2)‖K − U‖²_F, U = G − Λ/ρ, by Anderson–Moore
+  iterations (freeze P_K and L = A_cl L A_cl' + I, solve the resulting Sylvester
+  equation in closed form), each followed by an Armijo line search that never
+  accepts a gain with ρ(A_cl) ≥ 1;
+- G-step: weighted soft-thresholding of K + Λ/ρ (diagonal never penalized);
+- dual update Λ += ρ(K − G);
+
+then reweighting rounds w_ij = 1/(|G_ij| + ε). The path is warm-started from LQR;
+a γ whose sparse G destabilizes keeps the previous γ's solution. Each pattern is
+polished on the exact finite-horizon benchmark cost, which is also what every
+design reports.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import NamedTuple
+
+import numpy as np
+
+from codesign.design import Design
+from codesign.evaluation import spectral_radius
+
+from ._common import Timer
+from ._sparse import DecentralizedCache, as_path_point, check_gammas, design_on_pattern, with_diagonal_end
+
+__all__ = ["sparse_admm", "ADMM_GAMMAS", "admm_gamma_max"]
+
+#: Default weights (normalized units): from an (almost) dense LQR gain to a few links
+#: on the paper's family; the path is closed by the diagonal gain at γ = inf.
+ADMM_GAMMAS = tuple(float(g) for g in np.geomspace(1e-6, 0.1, 10))
+
+_ARMIJO = 1e-4        # sufficient-decrease constant of the line search
+_BACKTRACK = 0.5
+_MAX_BACKTRACKS = 40
+_KSTEP_MAXITER = 50
+_DOUBLINGS = 60        # A_cl^(2^60): only a gain at the stability boundary needs more
+_POWER_TOL = 1e-12     # max |A_cl^(2^k)| below which the remaining terms are negligible
+_REL_TOL = 1e-2        # relative part of the ADMM residual test (lqrsp's eps_rel)
+_WEIGHTS_SETTLED = 1e-2  # reweighting stops when the weights move less than this (relative)
+
+
+class _Point(NamedTuple):
+    """A stabilizing gain with its infinite-horizon cost J = trace(P), P, L and ∇J."""
+    K: np.ndarray
+    J: float
+    P: np.ndarray
+    L: np.ndarray
+    grad: np.ndarray
+
+
+def _evaluate(instance, K):
+    """J(K) = trace(P_K) and its gradient, or None when u = Kx does not stabilize.
+
+    P = A_cl' P A_cl + Q + K'RK and L = A_cl L A_cl' + I are summed by doubling
+    (Smith's squared iteration): both series share the powers A_cl^(2^k), and the
+    powers' decay doubles as the stability test, so a trial gain costs a few
+    dozen small products instead of two Schur-based Lyapunov solves and an
+    eigenvalue problem. ∇J = 2[(R + B'PB)K + B'PA] L.
+    """
+    A, B, R = instance.A, instance.B, instance.R
+    M = A + B @ K
+    P = instance.Q + K.T @ R @ K
+    L = np.eye(K.shape[0])
+    with np.errstate(over="ignore", invalid="ignore"):
+        for _ in range(_DOUBLINGS):
+            P = P + M.T @ P @ M
+            L = L + M @ L @ M.T
+            M = M @ M
+            size = np.abs(M).max()
+            if not np.isfinite(size):
+                return None
+            if size < _POWER_TOL:
+                break
+        else:
+            return None  # too close to (or past) the stability boundary to sum
+    BtP = B.T @ P
+    grad = 2.0 * ((R + BtP @ B) @ K + BtP @ A) @ L
+    return _Point(K, float(np.trace(P)), P, L, grad)
+
+
+def _stable(Acl) -> bool:
+    return spectral_radius(Acl) < 1.0
+
+
+def _kstep(instance, point, U, rho, *, tol, maxiter):
+    """Minimize trace(P_K) + (rho/2)||K - U||² from a stabilizing point. Returns (point, iterations)."""
+    A, B, R = instance.A, instance.B, instance.R
+    phi = point.J + 0.5 * rho * np.sum((point.K - U) ** 2)
+    for it in range(maxiter):
+        K, P, L = point.K, point.P, point.L
+        grad = point.grad + rho * (K - U)
+        if np.linalg.norm(grad) <= tol:
+            return point, it
+        # Anderson–Moore: with P and L frozen the stationarity condition is the
+        # Sylvester equation 2 M Kbar L + rho Kbar = -2 B'PA L + rho U, M = R + B'PB,
+        # solved exactly in the eigenbases of the two symmetric factors.
+        BtP = B.T @ P
+        m, V1 = np.linalg.eigh(R + BtP @ B)
+        l, V2 = np.linalg.eigh((L + L.T) / 2)
+        rhs = V1.T @ (-2.0 * BtP @ A @ L + rho * U) @ V2
+        Kbar = V1 @ (rhs / (2.0 * np.outer(m, l) + rho)) @ V2.T
+        direction = Kbar - K
+        slope = np.sum(grad * direction)
+        if not slope < 0:  # not a descent direction: fall back to steepest descent
+            direction, slope = -grad, -np.sum(grad * grad)
+        step = 1.0
+        for _ in range(_MAX_BACKTRACKS):
+            trial = _evaluate(instance, K + step * direction)
+            if trial is not None:  # unstable trial gains are never accepted
+                phi_trial = trial.J + 0.5 * rho * np.sum((trial.K - U) ** 2)
+                if phi_trial <= phi + _ARMIJO * step * slope:
+                    break
+            step *= _BACKTRACK
+        else:
+            return point, it + 1  # no acceptable step along this direction
+        point, phi = trial, phi_trial
+    return point, maxiter
+
+
+def _shrink(V, threshold):
+    """Weighted soft-thresholding; ``threshold`` is zero on the diagonal."""
+    return np.sign(V) * np.maximum(np.abs(V) - threshold, 0.0)
+
+
+def _offdiag_ones(n):
+    W = np.ones((n, n))
+    np.fill_diagonal(W, 0.0)
+    return W
+
+
+def admm_gamma_max(instance) -> float:
+    """Smallest γ (normalized units) at which the best diagonal gain is stationary for plain ℓ1.
+
+    At a diagonal K_d optimal over the diagonal, the subgradient condition of
+    J(K)/trace(P) + γ Σ_{i≠j} |K_ij| holds exactly when
+    γ ≥ max_{i≠j} |∇J(K_d)_ij| / trace(P). K_d is the decentralized gain of the
+    benchmark (finite-horizon) cost, a close stand-in for the infinite-horizon one.
+    Reweighting makes paths diagonal well below this value.
+    """
+    diagonal = DecentralizedCache(instance).usable()
+    point = None if diagonal is None else _evaluate(instance, np.array(diagonal.controller.K))
+    if point is None:
+        raise ValueError("no stabilizing diagonal gain on this instance")
+    grad = point.grad.copy()
+    np.fill_diagonal(grad, 0.0)
+    return float(np.max(np.abs(grad))) / instance.trace_P
+
+
+def sparse_admm(
+    instance,
+    *,
+    gammas: list | None = None,
+    reweight: int = 3,
+    rho: float = 100.0,
+    polish: bool = True,
+    eps_weight: float = 1e-3,
+    tol: float = 1e-4,
+    kstep_tol: float = 1e-2,
+    maxiter: int = 1000,
+    start: list | None = None,
+    diagonal_end: bool = True,
+):
+    """Sparse static gains along a γ path by ℓ1-regularized ADMM, polished on their patterns.
+
+    Parameters
+    ----------
+    instance : Instance
+    gammas : list of float, optional
+        Sparsity weights in units of the normalized cost; sorted increasing.
+        Default: :data:`ADMM_GAMMAS` (10 values, 1e-6 to 0.1).
+    reweight : int
+        Weighted ℓ1 solves per γ (lqrsp's ``reweightedIter``); after each,
+        ``w_ij = 1/(|G_ij| + eps_weight)``, stopping early once the weights settle.
+        The weights carry over to the next γ, as in lqrsp; the first solve of the
+        path is plain ℓ1.
+    rho : float
+        ADMM penalty.
+    polish : bool
+        Re-optimize the free entries of each pattern on the exact benchmark cost.
+    eps_weight : float
+        ε of the reweighting.
+    tol : float
+        Absolute ADMM tolerance per entry: stop when ‖K − G‖_F and ρ‖G − G_prev‖_F
+        fall below ``n * tol`` plus 1e-2 times ‖K‖_F (resp. ‖Λ‖_F), lqrsp's test.
+    kstep_tol : float
+        The K-step stops when the gradient of its objective has norm below this.
+    maxiter : int
+        ADMM iterations per weighted solve.
+    start : array_like, shape (n, n), optional
+        Stabilizing gain (``u = K x``) to start the path from; LQR by default.
+    diagonal_end : bool
+        Close the path with the decentralized gain as its γ → ∞ point
+        (``params["gamma"] = inf``).
+
+    Returns
+    -------
+    list of Design
+        One per γ (``params = {"gamma": γ, "reweight": ..., "rho": ...}``), then
+        the γ = inf end, each with its own links and exact finite-horizon cost,
+        information model ``instantaneous``. Patterns with no off-diagonal entry
+        are the decentralized gain. Extras record the ADMM and K-step iterations,
+        reweighting rounds, convergence, the polishing, the spectral radius and
+        whether the previous γ's gain was kept (``fallback``).
+
+    Raises
+    ------
+    ValueError
+        Negative or non-finite γ, non-positive ρ/ε/tol, or a start that is not a
+        stabilizing (n, n) gain.
+    """
+    n = instance.n
+    gammas = check_gammas(ADMM_GAMMAS if gammas is None else gammas)
+    for label, value in (("rho", rho), ("eps_weight", eps_weight), ("tol", tol), ("kstep_tol", kstep_tol)):
+        if not (np.isfinite(value) and value > 0):
+            raise ValueError(f"{label} must be a positive number, got {value!r}")
+    if isinstance(reweight, bool) or not isinstance(reweight, (int, np.integer)) or reweight < 1:
+        raise ValueError(f"reweight must be a positive integer, got {reweight!r}")
+    if isinstance(maxiter, bool) or not isinstance(maxiter, (int, np.integer)) or maxiter < 1:
+        raise ValueError(f"maxiter must be a positive integer, got {maxiter!r}")
+    K = np.array(instance.K_lqr if start is None else start, dtype=float)
+    if K.shape != (n, n) or not np.all(np.isfinite(K)):
+        raise ValueError(f"start must be a finite ({n}, {n}) gain, got shape {K.shape}")
+    start_point = _evaluate(instance, K)
+    if start_point is None or not _stable(instance.A + instance.B @ K):
+        raise ValueError(
+            f"start gain does not stabilize the instance (spectral radius "
+            f"{spectral_radius(instance.A + instance.B @ K):.6g}); ADMM needs a stabilizing start"
+        )
+
+    base = {"reweight": int(reweight), "rho": float(rho)}
+    scale = instance.trace_P  # the ADMM itself runs on trace(P_K), as in lqrsp
+    decentral = DecentralizedCache(instance)
+    point, G, Lam = start_point, K.copy(), np.zeros((n, n))
+    # Weights carry along the path as in lqrsp: an entry zeroed at one γ starts the
+    # next γ heavily penalized.
+    W = _offdiag_ones(n)
+    previous = None  # (design, point, G, Lam, W) of the last γ with a usable design
+    designs = []
+    for gamma in gammas:
+        params = {**base, "gamma": float(gamma)}
+        with Timer() as timer:
+            admm_iters = kstep_iters = rounds = 0
+            converged = True
+            for rounds in range(1, reweight + 1):
+                point, G, Lam, its, kits, ok = _admm(instance, point, G, Lam, scale * gamma * W / rho, rho,
+                                                 tol=tol, kstep_tol=kstep_tol, maxiter=maxiter)
+                admm_iters += its
+                kstep_iters += kits
+                converged &= ok
+                W_new = 1.0 / (np.abs(G) + eps_weight)
+                np.fill_diagonal(W_new, 0.0)
+                settled = np.linalg.norm(W_new - W) < _WEIGHTS_SETTLED * np.linalg.norm(W)
+                W = W_new
+                if settled:
+                    break
+            extras = {"solver": "admm", "admm_iterations": admm_iters, "kstep_iterations": kstep_iters,
+                      "reweight_rounds": rounds, "admm_converged": bool(converged), "fallback": False}
+            design = None
+            if _stable(instance.A + instance.B @ G):
+                design = design_on_pattern(instance, "sparse_admm", params, G, extras=extras,
+                                           polish=polish, decentral=decentral)
+                why = design.message
+            else:
+                why = "the sparse gain G found by ADMM does not stabilize"
+            if design is not None and design.status in ("optimal", "inaccurate"):
+                previous = (design, point, G.copy(), Lam.copy(), W.copy())
+            elif previous is not None:
+                # Keep the previous γ's solution and continue the path from it.
+                prev_design, point, G, Lam, W = previous
+                design = as_path_point(prev_design, "sparse_admm", params, {**extras, "fallback": True},
+                                       f"kept the previous gamma's gain: {why}")
+            else:
+                point, G, Lam = start_point, start_point.K.copy(), np.zeros((n, n))
+                design = Design.failure("sparse_admm", params, "diverged", why, info_model="instantaneous",
+                                        extras=extras)
+        designs.append(replace(design, seconds=float(timer.seconds)))
+    return with_diagonal_end(designs, "sparse_admm", base, decentral) if diagonal_end else designs
+
+
+def _admm(instance, point, G, Lam, threshold, rho, *, tol, kstep_tol, maxiter):
+    """ADMM on K = G from a warm start; returns (point, G, Lam, iterations, K-step iterations, converged).
+
+    Stops on lqrsp's primal/dual residual test with absolute tolerance ``tol``
+    (per entry) and relative tolerance 1e-2.
+    """
+    size = np.sqrt(G.size)
+    kstep_iters = 0
+    for it in range(1, maxiter + 1):
+        point, its = _kstep(instance, point, G - Lam / rho, rho, tol=kstep_tol, maxiter=_KSTEP_MAXITER)
+        kstep_iters += its
+        K = point.K
+        G_new = _shrink(K + Lam / rho, threshold)
+        dual = rho * np.linalg.norm(G_new - G)
+        G = G_new
+        primal = np.linalg.norm(K - G)
+        Lam = Lam + rho * (K - G)
+        eps_pri = size * tol + _REL_TOL * max(np.linalg.norm(K), np.linalg.norm(G))
+        eps_dual = size * tol + _REL_TOL * np.linalg.norm(Lam)
+        if primal < eps_pri and dual < eps_dual:
+            return point, G, Lam, it, kstep_iters, True
+    return point, G, Lam, maxiter, kstep_iters, False
+
+

@@ -1,0 +1,85 @@
+"""Designed communication topologies along a regularization path (paper Fig. 4)."""
+
+from __future__ import annotations
+
+import json
+
+import matplotlib.pyplot as plt
+import networkx as nx
+import numpy as np
+
+__all__ = ["plot_topology_path", "topology_path_records"]
+
+
+def _leading_eigenvector(A: np.ndarray) -> np.ndarray:
+    w, V = np.linalg.eig(A)
+    return np.abs(np.real(V[:, np.argmax(np.abs(w))]))
+
+
+def _draw(ax, adj, pos, colors, title):
+    graph = nx.DiGraph()
+    graph.add_nodes_from(range(adj.shape[0]))
+    graph.add_edges_from((j, i) for i, j in zip(*np.nonzero(adj)) if i != j)  # S_ij != 0: j sends to i
+    nx.draw_networkx_edges(graph, pos, ax=ax, width=0.6, alpha=0.5, arrows=True, arrowsize=5, node_size=60)
+    nodes = nx.draw_networkx_nodes(graph, pos, ax=ax, node_size=60, node_color=colors, cmap="Reds",
+                                   vmin=0, vmax=max(colors.max(), 1e-12), edgecolors="0.3", linewidths=0.5)
+    ax.set_title(title, fontsize=8)
+    ax.set_axis_off()
+    return nodes
+
+
+def plot_topology_path(instance, path, *, axes=None):
+    """Draw the plant graph, then each designed topology of a path.
+
+    Parameters
+    ----------
+    instance : codesign.Instance
+        Its plant graph is drawn first; nodes are coloured by the magnitude of
+        the leading eigenvector of A.
+    path : list of (weight, links, cost, support)
+        One entry per regularization weight, support as an (n, n) array
+        (nonzero = link).
+    axes : sequence of Axes, optional
+        ``len(path) + 1`` axes; a new figure is made if omitted.
+
+    Returns
+    -------
+    fig, axes
+    """
+    if axes is None:
+        fig, axes = plt.subplots(1, len(path) + 1, figsize=(2.3 * (len(path) + 1), 2.6), squeeze=False)
+        axes = axes[0]
+    else:
+        fig = axes[0].figure
+    pos = nx.kamada_kawai_layout(nx.from_numpy_array((instance.comm_adj != 0).astype(int)))
+    colors = _leading_eigenvector(instance.A)
+    plant_links = int(np.count_nonzero(instance.plant_adj) - np.count_nonzero(np.diag(instance.plant_adj)))
+    _draw(axes[0], instance.plant_adj, pos, colors, f"plant graph\n|E| = {plant_links}")
+    for ax, (weight, links, cost, support) in zip(axes[1:], path):
+        _draw(ax, np.asarray(support), pos, colors, f"β = {weight:.3g}\n|E| = {links}, J = {cost:.3f}")
+    fig.tight_layout()
+    return fig, axes
+
+
+def topology_path_records(records: list[dict], *, method: str = "grnn_sparse", weight: str = "beta",
+                          prefer_a_norm: float = 1.1) -> list[dict]:
+    """The records of one instance's regularization path, for :func:`plot_topology_path`.
+
+    Picks the instance (preferring ``a_norm == prefer_a_norm``, as the paper's
+    Fig. 4 does, then the lowest seed) with the most distinct weights.
+    """
+    by_instance: dict[str, dict] = {}
+    for r in records:
+        if r["method"] != method or r["status"] != "optimal" or weight not in r["params"]:
+            continue
+        key = json.dumps(r["instance"], sort_keys=True)
+        by_instance.setdefault(key, {})[r["params"][weight]] = r
+    if not by_instance:
+        return []
+
+    def rank(item):
+        inst = json.loads(item[0])
+        return (-len(item[1]), inst.get("a_norm") != prefer_a_norm, inst.get("seed", 0))
+
+    _, path = min(by_instance.items(), key=rank)
+    return [path[w] for w in sorted(path)]

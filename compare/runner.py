@@ -268,6 +268,7 @@ def run_experiment(
     runs = list({run.key: run for run in spec.runs()}.values())
     done = store.done_keys()
     pending = [run for run in runs if run.key not in done]
+    store.relabel({run.key: run.label for run in runs if run.key in done})
     summary = RunSummary(total=len(runs), already_stored=len(runs) - len(pending))
     store.set_meta(f"spec:{spec.name}", spec.source)
     bar = tqdm(total=len(pending), desc=f"{spec.name}", unit="run", disable=not progress or not pending)

@@ -132,6 +132,21 @@ class Store:
             self._conn.executemany(f"INSERT INTO designs VALUES ({', '.join('?' * 17)})", rows)
         return True
 
+    def relabel(self, labels: dict[str, str]) -> int:
+        """Set the legend label of stored runs (``run_key -> label``); returns how many changed.
+
+        Labels are presentation, not part of a run's content key, so a spec can rename
+        a method without recomputing it.
+        """
+        changed = 0
+        with self._conn:
+            for key, label in labels.items():
+                cur = self._conn.execute("UPDATE runs SET label = ? WHERE run_key = ? AND label != ?", (label, key, label))
+                if cur.rowcount:
+                    self._conn.execute("UPDATE designs SET label = ? WHERE run_key = ?", (label, key))
+                    changed += 1
+        return changed
+
     # -- reading ----------------------------------------------------------------
     def done_keys(self) -> set[str]:
         return {row[0] for row in self._conn.execute("SELECT run_key FROM runs")}

@@ -40,6 +40,15 @@ def test_run_store_and_resume(tmp_path):
         assert "spec:s" in store.meta()
 
 
+def test_a_new_label_renames_stored_runs_without_recomputing(tmp_path):
+    with Store(tmp_path / "r.sqlite") as store:
+        run_experiment(parse_spec(SPEC), store, progress=False)
+        renamed = parse_spec(SPEC.replace('method = "lqr"', 'method = "lqr"\nlabel = "Central"'))
+        summary = run_experiment(renamed, store, progress=False)
+        assert summary.computed == 0
+        assert {r["label"] for r in store.records() if r["method"] == "lqr"} == {"Central"}
+
+
 def test_add_run_is_atomic_and_idempotent(tmp_path):
     spec = parse_spec(SPEC)
     run = spec.runs()[0]

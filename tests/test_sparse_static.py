@@ -125,8 +125,26 @@ def _check_admm_front_against_truncation(instance, admm_designs):
     return strictly_better
 
 
-def test_admm_matches_or_beats_truncated_lqr(instance, paths):
+#: Known exceptions to "the ADMM front matches or beats truncation": (a_norm, seed) ->
+#: what happens. Reweighted l1 is a heuristic; here it settles on an 11-link pattern
+#: that shares 10 entries with truncation's and polishes to 1.140778 against
+#: truncation's 1.140272 (+4.4e-4). The same pattern wins under the infinite-horizon
+#: objective the ADMM minimizes, more reweighting rounds, another eps or rho, and a
+#: 19-point grid; plain l1 (reweight=1) matches truncation within 3e-6 there.
+ADMM_LOSES_TO_TRUNCATION = {
+    (1.05, 0): "reweighted l1's 11-link pattern polishes 4.4e-4 above truncation's",
+}
+
+
+def test_admm_matches_or_beats_truncated_lqr(instance, paths, request):
+    known = ADMM_LOSES_TO_TRUNCATION.get((instance.spec["a_norm"], instance.spec["seed"]))
+    if known:
+        request.applymarker(pytest.mark.xfail(strict=True, raises=AssertionError, reason=known))
     _check_admm_front_against_truncation(instance, paths["sparse_admm"])
+
+
+def test_plain_l1_admm_matches_or_beats_truncated_lqr(instance):
+    _check_admm_front_against_truncation(instance, sparse_admm(instance, reweight=1))
 
 
 def test_admm_gamma_max_gives_the_diagonal_gain():
@@ -274,8 +292,11 @@ def test_registry_and_preset():
 @pytest.mark.slow
 @pytest.mark.parametrize("a_norm", A_NORMS)
 @pytest.mark.parametrize("seed", range(1, 10))
-def test_paper_scale_admm_front_against_truncation(seed, a_norm):
+def test_paper_scale_admm_front_against_truncation(seed, a_norm, request):
     inst = paper_instance(seed, a_norm=a_norm)
+    known = ADMM_LOSES_TO_TRUNCATION.get((a_norm, seed))
+    if known:
+        request.applymarker(pytest.mark.xfail(strict=True, raises=AssertionError, reason=known))
     _check_admm_front_against_truncation(inst, sparse_admm(inst))
 
 

@@ -441,23 +441,40 @@ def grnn_method(variant: str):
     """
     if variant not in VARIANTS:
         raise ValueError(f"variant must be one of {VARIANTS}, got {variant!r}")
+    sig = inspect.signature(grnn)
+    # The co-design's own settings mean nothing to the other variants: leaving them
+    # out of the signature makes a spec that sets them an error that names the key.
+    dropped = {"variant"} | (set() if variant == "sparse" else set(_SPARSE_ONLY))
+    keep = [p for name, p in sig.parameters.items() if name not in dropped]
+    accepted = {p.name for p in keep}
+
+    def check(kwargs):
+        unknown = sorted(set(kwargs) - accepted)
+        if unknown:
+            raise TypeError(f"{method.__name__}() got unexpected keyword argument(s) {unknown}"
+                            + (f": {', '.join(_SPARSE_ONLY)} apply to grnn_sparse only" if
+                               set(unknown) & set(_SPARSE_ONLY) else ""))
 
     def method(instance, **kwargs):
+        check(kwargs)
         return grnn(instance, variant=variant, **kwargs)
 
     def batch(pairs, **options):
+        pairs = list(pairs)
+        for _, params in pairs:
+            check(params)
         return [[d] for d in grnn_batch([(inst, {**params, "variant": variant}) for inst, params in pairs],
                                         **options)]
 
-    sig = inspect.signature(grnn)
-    keep = [p for name, p in sig.parameters.items()
-            if name != "variant" and (variant == "sparse" or name != "beta")]
     method.__signature__ = sig.replace(parameters=keep)
     method.__name__ = method.__qualname__ = "grnn" if variant == "given" else f"grnn_{variant}"
     method.__doc__ = _METHOD_DOCS[variant] + "\n\nSee :func:`codesign.grnn` for the hyperparameters."
     method.batch = batch
     return method
 
+
+#: Settings of the co-design (l1 stage, threshold, refinement) that only ``sparse`` uses.
+_SPARSE_ONLY = ("beta", "l1_lr", "threshold", "refine_ensemble")
 
 _METHOD_DOCS = {
     "given": "GRNN with S trained on the given communication graph (one step delay per hop).",

@@ -185,6 +185,22 @@ def test_bad_input_raises(inst):
         grnn(inst, dtype="float16")
 
 
+@pytest.mark.parametrize("name", ["grnn", "grnn_dense", "grnn_fixed"])
+def test_co_design_settings_are_rejected_by_the_other_variants(inst, name):
+    from compare.registry import get_method
+
+    method = get_method(name)
+    for key in ("beta", "l1_lr", "threshold", "refine_ensemble"):
+        assert key not in method.hyperparameters
+        with pytest.raises(ValueError, match=f"params.{key}: unknown hyperparameter"):
+            method.check_params({key: 1})
+    with pytest.raises(TypeError, match="grnn_sparse only"):
+        method.func(inst, threshold=0.1, steps=1)
+    with pytest.raises(TypeError, match="threshold"):
+        method.batch([(inst, {"threshold": 0.1, "steps": 1})])
+    assert "threshold" in get_method("grnn_sparse").hyperparameters
+
+
 @pytest.mark.slow
 def test_float32_reaches_the_float64_median_cost():
     """Paper-scale: median final cost over instances agrees within 1 % between float32 and float64."""

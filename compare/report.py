@@ -165,9 +165,25 @@ def plant_links(records: list[dict]) -> dict:
     return {panel: float(np.median(v)) for panel, v in per_panel.items()}
 
 
+#: Designs whose median cost is more than this times centralized LQR's are off the
+#: interesting range: they are drawn as labelled triangles on the top edge so that
+#: the open loop (up to ~1e7 on unstable instances) does not flatten everyone else.
+OFF_SCALE = 2.0
+
+
 def _label_colors(labels) -> dict:
-    cmap = plt.get_cmap("tab10" if len(labels) <= 10 else "tab20")
-    return {label: cmap(i % cmap.N) for i, label in enumerate(labels)}
+    # tab10, then Dark2's hues: 18 colours that stay distinct (tab20's light shades
+    # are hard to tell from their dark twins).
+    palette = list(plt.get_cmap("tab10").colors) + list(plt.get_cmap("Dark2").colors)
+    return {label: palette[i % len(palette)] for i, label in enumerate(labels)}
+
+
+def _panel_top(points) -> float | None:
+    """Upper y limit of a panel, or None to show everything (no design is off the scale)."""
+    shown = [p for p in points if p.cost[1] <= OFF_SCALE]
+    if not shown or len(shown) == len(points):
+        return None
+    return min(OFF_SCALE, max(p.cost[2] for p in shown)) * 1.03
 
 
 def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = None,
@@ -196,12 +212,20 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
     panels = sorted({p.panel for p in points})
     labels = list(dict.fromkeys(p.label for p in sorted(points, key=lambda p: p.label)))
     colors = colors or _label_colors(labels)
+    spare = None
     if axes is None:
-        fig, axes = plt.subplots(1, max(1, len(panels)), figsize=(5.2 * max(1, len(panels)), 4.6), squeeze=False)
-        axes = axes[0]
+        ncols = min(3, max(1, len(panels)))
+        nrows = -(-max(1, len(panels)) // ncols)
+        fig, grid = plt.subplots(nrows, ncols, figsize=(6.0 * ncols, 4.8 * nrows), squeeze=False)
+        axes = list(grid.ravel())
+        for extra in axes[max(1, len(panels)):]:
+            extra.set_axis_off()
+        spare = axes[-1] if len(axes) > len(panels) else None  # the legend goes there
+        axes = axes[:max(1, len(panels))]
     else:
         fig = axes[0].figure
     for ax, panel in zip(axes, panels):
+        top = _panel_top([p for p in points if p.panel == panel and p.ok > 0])
         for label in labels:
             pts = [p for p in points if p.panel == panel and p.label == label and p.ok > 0]
             for info in sorted({p.info_model for p in pts}):
@@ -217,11 +241,21 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
                     markersize=6, capsize=2, elinewidth=0.8, linewidth=1.2,
                 )
         ax.set_xscale("symlog", linthresh=1.0)
-        ax.set_yscale("log")
         plain = FuncFormatter(lambda value, _: f"{value:g}")
-        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-        ax.yaxis.set_major_formatter(plain)
-        ax.yaxis.set_minor_formatter(NullFormatter())
+        if top is None:
+            ax.set_yscale("log")
+            ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+            ax.yaxis.set_major_formatter(plain)
+            ax.yaxis.set_minor_formatter(NullFormatter())
+        else:
+            low = min(0.98, min(p.cost[0] for p in points if p.panel == panel and p.ok > 0) * 0.99)
+            ax.set_ylim(low, top)
+            for p in points:
+                if p.panel == panel and p.ok > 0 and p.cost[1] > top:
+                    ax.plot(p.links[1], top, marker="^", color=colors[p.label], markersize=8, clip_on=False,
+                            linestyle="none", zorder=5)
+                    ax.annotate(f"{p.cost[1]:.3g}", (p.links[1], top), xytext=(0, -4), textcoords="offset points",
+                                ha="center", va="top", fontsize=7, color=colors[p.label])
         ax.xaxis.set_major_formatter(plain)
         ax.set_xlim(left=-0.4)
         ax.set_xlabel("directed off-diagonal links (median, IQR bars)")
@@ -240,9 +274,14 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
                label=INFO_STYLE[i]["description"])
         for i in used
     ]
-    fig.legend(handles=handles, loc="lower center", ncol=min(4, len(handles)), frameon=False,
-               bbox_to_anchor=(0.5, -0.02))
-    fig.tight_layout(rect=(0, 0.06 + 0.05 * ((len(handles) - 1) // 4), 1, 1))
+    if spare is not None:
+        spare.legend(handles=handles, loc="center", ncol=1 if len(handles) <= 16 else 2, frameon=False)
+        fig.tight_layout()
+        return fig, axes
+    ncol = min(4, len(handles))
+    rows = -(-len(handles) // ncol)
+    fig.legend(handles=handles, loc="lower center", ncol=ncol, frameon=False, bbox_to_anchor=(0.5, 0.0))
+    fig.tight_layout(rect=(0, min(0.5, (0.25 * rows + 0.2) / fig.get_figheight()), 1, 1))
     return fig, axes
 
 
@@ -400,7 +439,8 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         Experiment name -> spec TOML text, shown verbatim.
     title : str
     commands : list of str, optional
-        Commands that regenerate the report, shown at the top.
+        Commands that regenerate the report, shown at the top: the ``compare run``
+        commands in order, then the one that rebuilds it from the store alone.
     load_controller : callable, optional
         ``(run_key, idx) -> controller`` (e.g. :meth:`Store.controller`), for the
         designed-topology figure.
@@ -426,7 +466,11 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     statuses = Counter(r["status"] for r in records)
     lines = [f"# {title}", ""]
     if commands:
-        lines += ["Regenerate with " + " or, from the stored results alone, ".join(f"`{c}`" for c in commands) + ".", ""]
+        *run_commands, rebuild = commands
+        how = "Regenerate with " + " then ".join(f"`{c}`" for c in run_commands) if run_commands else ""
+        how += (" (runs already in the store are skipped), or from the stored results alone with "
+                if run_commands else "Regenerate from the stored results with ") + f"`{rebuild}`."
+        lines += [how, ""]
     lines += [
         f"{len(runs)} runs on {len(instances)} instances, {len(records)} designs. "
         "Costs are E[J] / trace(P) over the horizon (centralized LQR = 1); links are directed off-diagonal "
@@ -437,7 +481,9 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         "",
         "Markers and line styles give the information model: "
         + "; ".join(f"{v['marker']!r} {v['description']}" for v in INFO_STYLE.values())
-        + ". Points are medians over instances with 25–75 % bars on both axes.",
+        + ". Points are medians over instances with 25–75 % bars on both axes. Where some design's median "
+        f"cost is above {OFF_SCALE:g} (twice centralized LQR), that design is a triangle on the panel's top "
+        "edge with its median printed under it.",
         "",
         "## Medians by method",
         "",

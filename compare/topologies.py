@@ -65,21 +65,26 @@ def topology_path_records(records: list[dict], *, method: str = "grnn_sparse", w
                           prefer_a_norm: float = 1.1) -> list[dict]:
     """The records of one instance's regularization path, for :func:`plot_topology_path`.
 
-    Picks the instance (preferring ``a_norm == prefer_a_norm``, as the paper's
-    Fig. 4 does, then the lowest seed) with the most distinct weights.
+    A path is one instance and one setting of every other hyperparameter (a
+    Table 1 run at β = 1 with 750 training steps is not on the trade-off
+    sweep's 150-step path). Picks a path on ``a_norm == prefer_a_norm``, as
+    the paper's Fig. 4 does, when one has two or more weights; then the most
+    weights, then the lowest seed.
     """
-    by_instance: dict[str, dict] = {}
+    by_instance: dict[tuple, dict] = {}
     for r in records:
         if r["method"] != method or r["status"] != "optimal" or weight not in r["params"]:
             continue
-        key = json.dumps(r["instance"], sort_keys=True)
+        others = {k: v for k, v in r["params"].items() if k != weight}
+        key = (json.dumps(r["instance"], sort_keys=True), json.dumps(others, sort_keys=True))
         by_instance.setdefault(key, {})[r["params"][weight]] = r
     if not by_instance:
         return []
 
     def rank(item):
-        inst = json.loads(item[0])
-        return (-len(item[1]), inst.get("a_norm") != prefer_a_norm, inst.get("seed", 0))
+        inst = json.loads(item[0][0])
+        preferred = inst.get("a_norm") == prefer_a_norm and len(item[1]) >= 2
+        return (not preferred, -len(item[1]), inst.get("seed", 0), item[0][1])
 
     _, path = min(by_instance.items(), key=rank)
     return [path[w] for w in sorted(path)]

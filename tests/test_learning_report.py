@@ -8,7 +8,12 @@ matplotlib.use("Agg")
 
 import numpy as np  # noqa: E402
 
-from compare.learning_report import PAPER_TABLE1, table1_markdown, training_curves_figure  # noqa: E402
+from compare.learning_report import (  # noqa: E402
+    PAPER_TABLE1,
+    bootstrap_interval,
+    table1_markdown,
+    training_curves_figure,
+)
 
 
 def _records():
@@ -32,13 +37,32 @@ def test_table1_statistics_and_paper_values():
     rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
     grnn = [c.strip() for c in rows["GRNN"].split("|")[1:-1]]
     assert grnn[1] == "1.120"  # median of 1.10..1.14
-    assert grnn[2] == f"{PAPER_TABLE1['grnn'][0.995]:.3f}"
-    assert grnn[4] == "5/6"  # the diverged record is counted, not used
+    assert grnn[3] == f"{PAPER_TABLE1['grnn'][0.995]:.3f}"
+    assert grnn[5] == "5/6"  # the diverged record is counted, not used
     auto = [c.strip() for c in rows["Autonomous"].split("|")[1:-1]]
     assert auto[1] == "4.000"  # a mean, not a median
     sparse = [c.strip() for c in rows["GRNN-Sparse"].split("|")[1:-1]]
-    assert sparse[5].startswith("42.0 (52.0)") and "53.4" in sparse[5]
+    assert sparse[6].startswith("42.0 (52.0)") and "53.4" in sparse[6]
     assert "1 diverged" in text
+
+
+def test_interval_and_gaps_outside_it():
+    text = table1_markdown(_records())
+    grnn = [c.strip() for c in text.splitlines()[2].split("|")[1:-1]]
+    assert grnn[0] == "Autonomous" and grnn[2] == "[2.800, 5.200]"  # bootstrap of the mean of 2..6
+    # The 1.10..1.14 medians exclude the paper's 1.153 at 1.05 but not its 1.112 at 0.995.
+    assert "- GRNN, ‖A‖=1.05: ours 1.120 [1.100, 1.140] is below the paper's 1.153" in text
+    assert "- GRNN, ‖A‖=0.995" not in text
+
+
+def test_bootstrap_interval_covers_the_median_and_is_reproducible():
+    values = np.random.default_rng(1).lognormal(size=50)
+    low, high = bootstrap_interval(values)
+    assert low < np.median(values) < high
+    assert (low, high) == bootstrap_interval(values)
+    wider = bootstrap_interval(values, level=0.99)
+    assert wider[0] <= low and wider[1] >= high
+    assert np.isnan(bootstrap_interval([1.0])[0])
 
 
 def test_training_curves_figure_returns_handles():

@@ -46,7 +46,7 @@ def test_plant_boundary_and_plot_handles():
     assert np.isclose(axes[0].lines[-1].get_xdata()[0], links)
 
 
-def test_topology_path_picks_the_longest_path_and_draws_each_design():
+def test_topology_path_prefers_the_papers_a_norm_then_the_longest_path_and_draws_each_design():
     from codesign import paper_instance
     from compare.topologies import plot_topology_path, topology_path_records
 
@@ -60,7 +60,38 @@ def test_topology_path_picks_the_longest_path_and_draws_each_design():
     path = topology_path_records(records)
     assert [r["params"]["beta"] for r in path] == [0.1, 1.0, 10.0]
     assert all(r["instance"]["seed"] == 1 for r in path)
+    # A longer path elsewhere, and a run with other settings on the preferred
+    # instance, do not displace or join the preferred a_norm's path.
+    for beta in (0.01, 0.1, 1.0, 10.0):
+        rec = _rec(dict(INST[0], seed=0, a_norm=0.995), "GRNN-Sparse", 10, 1.2, params={"beta": beta})
+        rec["method"] = "grnn_sparse"
+        records.append(rec)
+    other = _rec(dict(INST[0], seed=1, a_norm=1.1), "GRNN-Sparse", 10, 1.2, params={"beta": 2.0, "steps": 750})
+    other["method"] = "grnn_sparse"
+    path = topology_path_records(records + [other])
+    assert [r["params"]["beta"] for r in path] == [0.1, 1.0, 10.0]
+    assert all(r["instance"]["seed"] == 1 and r["instance"]["a_norm"] == 1.1 for r in path)
     inst = paper_instance(1, n=8, degree=4, a_norm=1.1, horizon=10)
     supports = [np.eye(8) + np.diag(np.ones(7), 1) * (k > 0) for k in range(3)]
     fig, axes = plot_topology_path(inst, [(b, 7 * (k > 0), 1.2, s) for k, (b, s) in enumerate(zip((0.1, 1, 10), supports))])
     assert len(axes) == 4 and axes[1].get_title().startswith("β = 0.1")
+
+
+def test_report_counts_runs_and_shows_how_to_regenerate(tmp_path):
+    from compare.report import write_report
+
+    records = []
+    for i, inst in enumerate(INST):
+        for label, links, cost in (("a", 0, 2.0), ("b", 10, 1.1)):
+            rec = _rec(inst, label, links, cost)
+            rec.update(run_key=f"{label}{i}", cost_stderr=0.0, cost_kind="exact", message="", seconds=0.1,
+                       controller_kind=None, extras={}, experiment="x")
+            records.append(rec)
+    commands = ["compare run x --out o", "compare run y --out o", "compare report --out o"]
+    files = write_report(records, tmp_path, title="T", commands=commands)
+    text = files["md"].read_text()
+    assert "6 runs on 3 instances, 6 designs." in text
+    assert ("Regenerate with `compare run x --out o` then `compare run y --out o` (runs already in the store "
+            "are skipped), or from the stored results alone with `compare report --out o`.") in text
+    alone = write_report(records, tmp_path, title="T", commands=["compare report --out o"])["md"].read_text()
+    assert "Regenerate from the stored results with `compare report --out o`." in alone

@@ -71,14 +71,14 @@ def topology_path_records(records: list[dict], *, method: str = "grnn_sparse", w
     the paper's Fig. 4 does, when one has two or more weights; then the most
     weights, then the lowest seed.
     """
-    by_instance: dict[tuple, dict] = {}
+    paths: dict[tuple, dict] = {}
     for r in records:
         if r["method"] != method or r["status"] != "optimal" or weight not in r["params"]:
             continue
         others = {k: v for k, v in r["params"].items() if k != weight}
         key = (json.dumps(r["instance"], sort_keys=True), json.dumps(others, sort_keys=True))
-        by_instance.setdefault(key, {})[r["params"][weight]] = r
-    if not by_instance:
+        paths.setdefault(key, {})[r["params"][weight]] = r
+    if not paths:
         return []
 
     def rank(item):
@@ -86,5 +86,5 @@ def topology_path_records(records: list[dict], *, method: str = "grnn_sparse", w
         preferred = inst.get("a_norm") == prefer_a_norm and len(item[1]) >= 2
         return (not preferred, -len(item[1]), inst.get("seed", 0), item[0][1])
 
-    _, path = min(by_instance.items(), key=rank)
+    _, path = min(paths.items(), key=rank)
     return [path[w] for w in sorted(path)]

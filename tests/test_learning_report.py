@@ -10,6 +10,7 @@ import numpy as np  # noqa: E402
 
 from compare.learning_report import (  # noqa: E402
     PAPER_TABLE1,
+    SPARSE_EDGES_NOTE,
     bootstrap_interval,
     table1_markdown,
     training_curves_figure,
@@ -42,7 +43,7 @@ def test_table1_statistics_and_paper_values():
     auto = [c.strip() for c in rows["Autonomous"].split("|")[1:-1]]
     assert auto[1] == "4.000"  # a mean, not a median
     sparse = [c.strip() for c in rows["GRNN-Sparse"].split("|")[1:-1]]
-    assert sparse[6].startswith("42.0 (52.0)") and "53.4" in sparse[6]
+    assert sparse[6] == "42.0 (52.0) [50.8, 53.2]; paper (53.4)"  # 50..54 edges with self-loops
     assert "1 diverged" in text
 
 
@@ -53,6 +54,9 @@ def test_interval_and_gaps_outside_it():
     # The 1.10..1.14 medians exclude the paper's 1.153 at 1.05 but not its 1.112 at 0.995.
     assert "- GRNN, ‖A‖=1.05: ours 1.120 [1.100, 1.140] is below the paper's 1.153" in text
     assert "- GRNN, ‖A‖=0.995" not in text
+    assert "- GRNN-Sparse, ‖A‖=1.05: 52.0 edges with self-loops [50.8, 53.2] against the paper's 56.1." in text
+    assert "- GRNN-Sparse, ‖A‖=0.995: 52.0 edges" in text  # 53.4 is just outside [50.8, 53.2]
+    assert text.count(SPARSE_EDGES_NOTE) == 1
 
 
 def test_bootstrap_interval_covers_the_median_and_is_reproducible():

@@ -136,10 +136,14 @@ ADMM_LOSES_TO_TRUNCATION = {
 }
 
 
-def test_admm_matches_or_beats_truncated_lqr(instance, paths, request):
+def _expect_known_loss(request, instance):
     known = ADMM_LOSES_TO_TRUNCATION.get((instance.spec["a_norm"], instance.spec["seed"]))
     if known:
         request.applymarker(pytest.mark.xfail(strict=True, raises=AssertionError, reason=known))
+
+
+def test_admm_matches_or_beats_truncated_lqr(instance, paths, request):
+    _expect_known_loss(request, instance)
     _check_admm_front_against_truncation(instance, paths["sparse_admm"])
 
 
@@ -294,9 +298,7 @@ def test_registry_and_preset():
 @pytest.mark.parametrize("seed", range(1, 10))
 def test_paper_scale_admm_front_against_truncation(seed, a_norm, request):
     inst = paper_instance(seed, a_norm=a_norm)
-    known = ADMM_LOSES_TO_TRUNCATION.get((a_norm, seed))
-    if known:
-        request.applymarker(pytest.mark.xfail(strict=True, raises=AssertionError, reason=known))
+    _expect_known_loss(request, inst)
     _check_admm_front_against_truncation(inst, sparse_admm(inst))
 
 

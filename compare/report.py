@@ -225,9 +225,10 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
     else:
         fig = axes[0].figure
     for ax, panel in zip(axes, panels):
-        top = _panel_top([p for p in points if p.panel == panel and p.ok > 0])
+        usable = [p for p in points if p.panel == panel and p.ok > 0]
+        top = _panel_top(usable)
         for label in labels:
-            pts = [p for p in points if p.panel == panel and p.label == label and p.ok > 0]
+            pts = [p for p in usable if p.label == label]
             for info in sorted({p.info_model for p in pts}):
                 series = sorted((p for p in pts if p.info_model == info), key=lambda p: (p.links[1], p.cost[1]))
                 style = INFO_STYLE[info]
@@ -248,10 +249,10 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
             ax.yaxis.set_major_formatter(plain)
             ax.yaxis.set_minor_formatter(NullFormatter())
         else:
-            low = min(0.98, min(p.cost[0] for p in points if p.panel == panel and p.ok > 0) * 0.99)
+            low = min(0.98, min(p.cost[0] for p in usable) * 0.99)
             ax.set_ylim(low, top)
-            for p in points:
-                if p.panel == panel and p.ok > 0 and p.cost[1] > top:
+            for p in usable:
+                if p.cost[1] > top:
                     ax.plot(p.links[1], top, marker="^", color=colors[p.label], markersize=8, clip_on=False,
                             linestyle="none", zorder=5)
                     ax.annotate(f"{p.cost[1]:.3g}", (p.links[1], top), xytext=(0, -4), textcoords="offset points",

@@ -222,6 +222,15 @@ def sparse_admm(
     ValueError
         Negative or non-finite γ, non-positive ρ/ε/tol, or a start that is not a
         stabilizing (n, n) gain.
+
+    Notes
+    -----
+    Both ℓ1 variants are heuristics for a combinatorial choice of pattern. On the
+    paper's family (seeds 0-29 at ‖A‖ = 0.995 and 1.05, default grid) the front of
+    the default ``reweight=3`` matches or beats truncated LQR (:func:`baselines.truncated_lqr`,
+    within 1e-4) at every link count on 59 of 60 instances; the miss is a near-tie
+    between two LQR entries 0.45 % apart, 4.4e-4 in cost. Plain ℓ1 (``reweight=1``)
+    misses on 3 of 60, by up to 8.9e-3.
     """
     n = instance.n
     gammas = check_gammas(ADMM_GAMMAS if gammas is None else gammas)

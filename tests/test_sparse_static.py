@@ -125,19 +125,27 @@ def _check_admm_front_against_truncation(instance, admm_designs):
     return strictly_better
 
 
-#: Known exceptions to "the ADMM front matches or beats truncation": (a_norm, seed) ->
-#: what happens. Reweighted l1 is a heuristic; here it settles on an 11-link pattern
-#: that shares 10 entries with truncation's and polishes to 1.140778 against
-#: truncation's 1.140272 (+4.4e-4). The same pattern wins under the infinite-horizon
-#: objective the ADMM minimizes, more reweighting rounds, another eps or rho, and a
-#: 19-point grid; plain l1 (reweight=1) matches truncation within 3e-6 there.
+#: Known exceptions to "the ADMM front matches or beats truncation" on the paper
+#: family, seeds 0-29 at both a_norms (60 instances): (a_norm, seed) -> what happens.
+#: Both are heuristics for a combinatorial problem, and each misses somewhere.
+#: Reweighted l1 (the default, reweight=3) misses once: at 11 links it keeps LQR's
+#: 12th-largest off-diagonal entry (|K_ij| = 0.16458) where truncation keeps the 10th
+#: (0.16532, 0.45 % larger) and polishes to 1.140778 against 1.140272 (+4.4e-4). The
+#: same pattern comes out with 5 rounds, eps 1e-4 or 1e-2, rho = 10, a 19-point grid,
+#: tolerances tightened to convergence, and a restart from LQR at every gamma.
 ADMM_LOSES_TO_TRUNCATION = {
-    (1.05, 0): "reweighted l1's 11-link pattern polishes 4.4e-4 above truncation's",
+    (1.05, 0): "reweighted l1 keeps LQR's 12th-largest entry where truncation keeps the 10th: +4.4e-4",
+}
+#: Plain l1 (reweight=1) misses three times, by more.
+PLAIN_L1_LOSES_TO_TRUNCATION = {
+    (0.995, 10): "plain l1's 6-link point is 1.6e-3 above truncation's",
+    (0.995, 20): "plain l1's 2-link point is 8.9e-3 above truncation's",
+    (1.05, 21): "plain l1's 3-link point is 5.0e-4 above truncation's",
 }
 
 
-def _expect_known_loss(request, instance):
-    known = ADMM_LOSES_TO_TRUNCATION.get((instance.spec["a_norm"], instance.spec["seed"]))
+def _expect_known_loss(request, instance, known_losses=ADMM_LOSES_TO_TRUNCATION):
+    known = known_losses.get((instance.spec["a_norm"], instance.spec["seed"]))
     if known:
         request.applymarker(pytest.mark.xfail(strict=True, raises=AssertionError, reason=known))
 
@@ -147,7 +155,8 @@ def test_admm_matches_or_beats_truncated_lqr(instance, paths, request):
     _check_admm_front_against_truncation(instance, paths["sparse_admm"])
 
 
-def test_plain_l1_admm_matches_or_beats_truncated_lqr(instance):
+def test_plain_l1_admm_matches_or_beats_truncated_lqr(instance, request):
+    _expect_known_loss(request, instance, PLAIN_L1_LOSES_TO_TRUNCATION)
     _check_admm_front_against_truncation(instance, sparse_admm(instance, reweight=1))
 
 
@@ -295,11 +304,12 @@ def test_registry_and_preset():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("a_norm", A_NORMS)
-@pytest.mark.parametrize("seed", range(1, 10))
-def test_paper_scale_admm_front_against_truncation(seed, a_norm, request):
+@pytest.mark.parametrize("seed", range(1, 30))
+@pytest.mark.parametrize("reweight", [3, 1], ids=["reweighted", "plain"])
+def test_paper_scale_admm_front_against_truncation(reweight, seed, a_norm, request):
     inst = paper_instance(seed, a_norm=a_norm)
-    _expect_known_loss(request, inst)
-    _check_admm_front_against_truncation(inst, sparse_admm(inst))
+    _expect_known_loss(request, inst, ADMM_LOSES_TO_TRUNCATION if reweight > 1 else PLAIN_L1_LOSES_TO_TRUNCATION)
+    _check_admm_front_against_truncation(inst, sparse_admm(inst, reweight=reweight))
 
 
 @pytest.mark.slow

@@ -307,8 +307,13 @@ def _fmt_iqr(q: tuple, digits: int = 4) -> str:
 
 
 def _params_text(params: str) -> str:
+    def text(value):
+        # Grid values such as 0.0021544346900318843 read better at 4 digits; the
+        # store and the CSV keep them exact.
+        return _fmt(value) if isinstance(value, float) and np.isfinite(value) else str(value)
+
     data = json.loads(params)
-    return ", ".join(f"{k}={v}" for k, v in sorted(data.items())) or "—"
+    return ", ".join(f"{k}={text(v)}" for k, v in sorted(data.items())) or "—"
 
 
 def _summary_tables(points: list[Point]) -> list[str]:
@@ -321,7 +326,8 @@ def _summary_tables(points: list[Point]) -> list[str]:
             "| method | information | params | designs | ok | links: median [IQR] | self-loops | cost: median [IQR] |",
             "|---|---|---|---:|---:|---|---:|---|",
         ]
-        for p in sorted(pts, key=lambda p: (p.label, p.links[1] if np.isfinite(p.links[1]) else -1, p.params)):
+        for p in sorted(pts, key=lambda p: (p.label, p.links[1] if np.isfinite(p.links[1]) else -1,
+                                            p.cost[1] if np.isfinite(p.cost[1]) else np.inf, p.params)):
             lines.append(
                 f"| {p.label} | {p.info_model} | {_params_text(p.params)} | {p.designs} | {p.ok} | "
                 f"{_fmt_iqr(p.links, 3)} | {_fmt(p.self_loops, 3)} | {_fmt_iqr(p.cost)} |"

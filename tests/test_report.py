@@ -95,3 +95,11 @@ def test_report_counts_runs_and_shows_how_to_regenerate(tmp_path):
             "are skipped), or from the stored results alone with `compare report --out o`.") in text
     alone = write_report(records, tmp_path, title="T", commands=["compare report --out o"])["md"].read_text()
     assert "Regenerate from the stored results with `compare report --out o`." in alone
+
+
+def test_params_column_rounds_grid_values_and_keeps_the_rest():
+    from compare.report import _params_text
+
+    text = _params_text('{"gamma": 0.0021544346900318843, "reweight": 3, "rho": 100.0, "end": Infinity, "g": "plant"}')
+    assert text == "end=inf, g=plant, gamma=0.002154, reweight=3, rho=100"
+    assert _params_text("{}") == "—"

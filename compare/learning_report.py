@@ -12,6 +12,7 @@ import json
 from collections import defaultdict
 
 import numpy as np
+import scipy.stats
 
 __all__ = ["table1_markdown", "training_curves_figure", "bootstrap_interval", "PAPER_TABLE1", "PAPER_SPARSE_EDGES",
            "GAP_NOTES", "SPARSE_EDGES_NOTE"]
@@ -113,10 +114,9 @@ def bootstrap_interval(values, statistic=np.median, *, level: float = 0.95, seed
     values = np.asarray(values, dtype=float)
     if values.size < 2:
         return float("nan"), float("nan")
-    rng = np.random.default_rng(seed)
-    stats = statistic(values[rng.integers(0, values.size, (_BOOTSTRAP, values.size))], axis=1)
-    tail = (1 - level) / 2
-    return float(np.quantile(stats, tail)), float(np.quantile(stats, 1 - tail))
+    result = scipy.stats.bootstrap((values,), statistic, n_resamples=_BOOTSTRAP, vectorized=True,
+                                   confidence_level=level, method="percentile", rng=np.random.default_rng(seed))
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
 
 
 def table1_markdown(records) -> str:

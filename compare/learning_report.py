@@ -70,7 +70,7 @@ def _gap_note(method, stat, paper, low, high) -> str:
     # The paper's statistic is computed on its own random instances (its code seeds
     # nothing) and carries the same sampling noise as ours: the difference has sqrt(2)
     # times the spread of one statistic, estimated from our bootstrap interval.
-    spread = (high - low) / (2 * 1.959964)
+    spread = (high - low) / (2 * scipy.stats.norm.ppf(0.975))  # the interval is a 95 % one
     z = (stat - paper) / (np.sqrt(2) * spread) if spread > 0 else np.inf
     if abs(z) < _NOISE_Z:
         return (f"Within instance-sampling noise: {z:+.1f} standard deviations of the difference "

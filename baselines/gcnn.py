@@ -26,6 +26,7 @@ import torch
 from codesign.controllers import register_controller
 from codesign.design import Design, count_links
 from codesign.evaluation import simulate, spectral_radius, validation_set
+from codesign.methods import method
 from codesign.training import DTYPES, BatchedAdam
 
 __all__ = ["gcnn", "gcnn_batch", "GCNNController", "GCNN_TAPS", "GCNN_FEATURES"]
@@ -398,6 +399,8 @@ def _check(instance, seed, s):
         raise ValueError(f"dtype must be one of {sorted(DTYPES)}, got {s['dtype']!r}")
 
 
+# The runner hands gcnn_batch up to 25 runs at once: they train in shared stacks.
+@method("gcnn", label="GCNN", batch=gcnn_batch, batch_size=25, produces=("training_curve",))
 def gcnn(instance, *, seed: int = 0, steps: int = 750, batch: int = 20, lr: float = 0.01, decay: float = 0.9,
          decay_every: int = 10, weight_decay: float = 2.0, ensemble: int = 2, curve_every: int = 10,
          curve_size: int = 100, dtype: str = "float64", stability_steps: int = 500,
@@ -430,9 +433,3 @@ def gcnn(instance, *, seed: int = 0, steps: int = 750, batch: int = 20, lr: floa
                     dtype=dtype, stability_steps=stability_steps, stability_size=stability_size)
     return gcnn_batch([(instance, {"seed": seed, **settings})])[0]
 
-
-def _batch(pairs, **options):
-    return [[d] for d in gcnn_batch(pairs, **options)]
-
-
-gcnn.batch = _batch  # lets a runner train many GCNN runs in shared stacks

@@ -7,6 +7,7 @@ import numpy as np
 from codesign.controllers import StaticGain, ZeroInput
 from codesign.design import Design, count_links
 from codesign.evaluation import spectral_radius, static_gain_cost
+from codesign.methods import method
 
 from ._common import Timer
 from .polish import polish_gain
@@ -14,6 +15,7 @@ from .polish import polish_gain
 __all__ = ["lqr", "autonomous", "decentralized"]
 
 
+@method("lqr", label="LQR (centralized)")
 def lqr(instance) -> Design:
     """Centralized LQR ``u = K x``, ``K = -(R + B'PB)^{-1} B'PA``.
 
@@ -36,6 +38,7 @@ def lqr(instance) -> Design:
     )
 
 
+@method("autonomous", label="Autonomous (u = 0)")
 def autonomous(instance) -> Design:
     """No control, ``u = 0``: the open-loop cost, with zero links."""
     return Design(
@@ -50,6 +53,7 @@ def autonomous(instance) -> Design:
     )
 
 
+@method("decentralized", label="Decentralized (diagonal K)")
 def decentralized(instance, *, start: str = "lqr_diagonal") -> Design:
     """Best diagonal static gain ``u_i = k_i x_i`` for the benchmark cost (zero links).
 

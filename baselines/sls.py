@@ -36,6 +36,7 @@ from codesign.controllers import register_controller
 from codesign.design import Design, count_links
 from codesign.evaluation import response_cost
 from codesign.instances import hop_distances
+from codesign.methods import method
 
 from ._common import Timer
 from .qi import _check_speed, is_quadratically_invariant
@@ -245,6 +246,7 @@ def _solve_qp(instance, dist, T, *, speed, act_delay, fir):
 
 
 # -- the method ------------------------------------------------------------------------
+@method("sls", label="SLS (delay constraints)")
 def sls(
     instance,
     *,
@@ -364,6 +366,7 @@ def sls(
     )
 
 
+@method("sls_topologies", label="SLS (topology family)")
 def sls_topologies(
     instance,
     *,

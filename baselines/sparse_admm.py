@@ -34,6 +34,7 @@ import numpy as np
 
 from codesign.design import Design
 from codesign.evaluation import spectral_radius
+from codesign.methods import method
 
 from ._common import Timer
 from ._sparse import DecentralizedCache, as_path_point, check_gammas, design_on_pattern, with_diagonal_end
@@ -161,6 +162,7 @@ def admm_gamma_max(instance) -> float:
     return float(np.max(np.abs(grad))) / instance.trace_P
 
 
+@method("sparse_admm", label="Sparse K (l1 ADMM)")
 def sparse_admm(
     instance,
     *,

@@ -29,6 +29,7 @@ from dataclasses import replace
 import numpy as np
 
 from codesign.design import Design
+from codesign.methods import method
 
 from ._common import Timer
 from ._sparse import DecentralizedCache, check_gammas, design_on_pattern, with_diagonal_end
@@ -149,6 +150,7 @@ class SparseSDP:
         return float(np.max(np.abs(grad))) / self.instance.trace_P
 
 
+@method("sparse_sdp", label="Sparse K (l1 SDP)")
 def sparse_sdp(
     instance,
     *,

@@ -13,6 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from codesign.design import Design
+from codesign.methods import method
 
 from ._common import Timer
 from ._sparse import DecentralizedCache, design_on_pattern
@@ -35,6 +36,7 @@ def truncation_mask(K, links: int) -> np.ndarray:
     return mask
 
 
+@method("truncated_lqr", label="Truncated LQR K")
 def truncated_lqr(instance, *, links: list | None = None, polish: bool = True) -> list[Design]:
     """Sparse static gains by truncating the LQR gain to ``links`` off-diagonal entries, then polishing.
 

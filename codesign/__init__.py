@@ -5,6 +5,7 @@ Public names::
     from codesign import paper_instance, Instance, Design
     from codesign import static_gain_cost, simulate, validation_set
     from codesign import grnn, grnn_batch, GRNNController
+    from codesign import method, score          # register your own method, score a controller
 """
 
 from .controllers import StaticGain, ZeroInput, controller_from_arrays, register_controller
@@ -20,8 +21,10 @@ from .evaluation import (
     static_gain_cost_and_grad,
     validation_set,
 )
-from .grnn import GRNNController, grnn, grnn_batch, grnn_defaults, grnn_method, paper_beta
+from .grnn import GRNNController, grnn, grnn_batch, grnn_defaults, paper_beta
 from .instances import Instance, InstanceError, hop_distances, paper_instance
+from .methods import Method, get_method, method, registered_methods
+from .scoring import evaluate, score
 
 __version__ = "0.1.0"
 
@@ -50,7 +53,12 @@ __all__ = [
     "GRNNController",
     "grnn",
     "grnn_batch",
-    "grnn_method",
     "grnn_defaults",
     "paper_beta",
+    "Method",
+    "method",
+    "get_method",
+    "registered_methods",
+    "score",
+    "evaluate",
 ]

@@ -12,7 +12,6 @@ Entry points: :func:`grnn` (one instance, one variant) and :func:`grnn_batch`
 
 from __future__ import annotations
 
-import inspect
 import time
 from dataclasses import dataclass
 
@@ -21,9 +20,10 @@ import numpy as np
 from .controllers import register_controller
 from .design import Design, count_links
 from .evaluation import simulate, spectral_radius, validation_set
+from .methods import method
 from .training import DTYPES, ModelSpec, init_fwg, train_stack
 
-__all__ = ["GRNNController", "grnn", "grnn_batch", "grnn_method", "VARIANTS", "grnn_defaults", "paper_beta",
+__all__ = ["GRNNController", "grnn", "grnn_batch", "VARIANTS", "grnn_defaults", "paper_beta",
            "PAPER_BETA"]
 
 VARIANTS = ("given", "dense", "fixed", "sparse")
@@ -430,55 +430,30 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
     return grnn_batch([(instance, {"variant": variant, "beta": beta, "seed": seed, **settings})])[0]
 
 
-def grnn_method(variant: str):
-    """``grnn`` with the variant bound, as the comparison harness registers it.
-
-    The returned function has :func:`grnn`'s keyword-only signature minus
-    ``variant`` (and minus ``beta`` unless ``variant="sparse"``), and a
-    ``batch(pairs)`` attribute: given [(instance, params), ...] it trains them
-    all in shared stacks and returns one list of designs per pair, which is how
-    a runner can make a sweep cost a fraction of separate trainings.
-    """
-    if variant not in VARIANTS:
-        raise ValueError(f"variant must be one of {VARIANTS}, got {variant!r}")
-    sig = inspect.signature(grnn)
-    # The co-design's own settings mean nothing to the other variants: leaving them
-    # out of the signature makes a spec that sets them an error that names the key.
-    dropped = {"variant"} | (set() if variant == "sparse" else set(_SPARSE_ONLY))
-    keep = [p for name, p in sig.parameters.items() if name not in dropped]
-    accepted = {p.name for p in keep}
-
-    def check(kwargs):
-        unknown = sorted(set(kwargs) - accepted)
-        if unknown:
-            raise TypeError(f"{method.__name__}() got unexpected keyword argument(s) {unknown}"
-                            + (f": {', '.join(_SPARSE_ONLY)} apply to grnn_sparse only" if
-                               set(unknown) & set(_SPARSE_ONLY) else ""))
-
-    def method(instance, **kwargs):
-        check(kwargs)
-        return grnn(instance, variant=variant, **kwargs)
-
-    def batch(pairs, **options):
-        pairs = list(pairs)
-        for _, params in pairs:
-            check(params)
-        return [[d] for d in grnn_batch([(inst, {**params, "variant": variant}) for inst, params in pairs],
-                                        **options)]
-
-    method.__signature__ = sig.replace(parameters=keep)
-    method.__name__ = method.__qualname__ = "grnn" if variant == "given" else f"grnn_{variant}"
-    method.__doc__ = _METHOD_DOCS[variant] + "\n\nSee :func:`codesign.grnn` for the hyperparameters."
-    method.batch = batch
-    return method
-
-
 #: Settings of the co-design (l1 stage, threshold, refinement) that only ``sparse`` uses.
 _SPARSE_ONLY = ("beta", "l1_lr", "threshold", "refine_ensemble")
 
-_METHOD_DOCS = {
-    "given": "GRNN with S trained on the given communication graph (one step delay per hop).",
-    "dense": "GRNN with all N^2 entries of S trained (a centralized, delayed controller).",
-    "fixed": "GRNN with S frozen at the normalized adjacency; only F, W, G train.",
-    "sparse": "GRNN co-design: l1 stage on a dense S, threshold, refinement on the found support.",
-}
+
+class _VariantBatch:
+    """``grnn_batch`` for one variant: trains a runner's batch of runs in shared stacks."""
+
+    def __init__(self, variant: str):
+        self.variant = variant
+
+    def __call__(self, pairs):
+        return grnn_batch([(inst, {**params, "variant": self.variant}) for inst, params in pairs])
+
+
+# One function, four methods: the variant is bound, and the co-design's own settings
+# are hidden from the other variants so that a spec setting them is an error naming the key.
+for _name, _variant, _label, _summary in (
+    ("grnn", "given", "GRNN", "GRNN with S trained on the given communication graph (one step delay per hop)."),
+    ("grnn_dense", "dense", "GRNN-Dense", "GRNN with all N^2 entries of S trained (a centralized, delayed controller)."),
+    ("grnn_fixed", "fixed", "GRNN-Fixed", "GRNN with S frozen at the normalized adjacency; only F, W, G train."),
+    ("grnn_sparse", "sparse", "GRNN-Sparse",
+     "GRNN co-design: l1 stage on a dense S, threshold, refinement on the found support."),
+):
+    method(_name, label=_label, summary=_summary, bind={"variant": _variant},
+           exclude=() if _variant == "sparse" else _SPARSE_ONLY, batch=_VariantBatch(_variant), batch_size=25,
+           produces=("training_curve", "topology_path") if _variant == "sparse" else ("training_curve",),
+           path_param="beta" if _variant == "sparse" else None)(grnn)

@@ -2,7 +2,7 @@
 
 Public names::
 
-    from compare import load_spec, run_experiment, Store, write_report, methods, register
+    from compare import load_spec, run_experiment, Store, write_report, methods, method
 """
 
 from importlib import import_module
@@ -10,7 +10,13 @@ from importlib import import_module
 # Names resolve on first use, so that `compare --help` does not pay for matplotlib.
 _EXPORTS = {
     "Method": "registry",
+    "method": "registry",
     "register": "registry",
+    "Plugin": "plugins",
+    "PluginError": "plugins",
+    "parse_plugin": "plugins",
+    "load_plugins": "plugins",
+    "fingerprint": "fingerprint",
     "get_method": "registry",
     "methods": "registry",
     "ExperimentSpec": "spec",

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import click
 
-from .registry import methods as registered_methods
 from .spec import SpecError, load_spec, preset_names
 
 __all__ = ["main"]
@@ -42,7 +41,12 @@ def _write_report(store, out: Path) -> dict:
     commands.append(f"compare report --out {out}")
     title = "Comparison report: " + ", ".join(sorted(specs)) if specs else "Comparison report"
     return write_report(store.records(), out, specs=specs, title=title, commands=commands,
-                        load_controller=store.controller)
+                        load_controller=store.controller, meta=meta, members=store.members())
+
+
+_PLUGIN_HELP = ("Import a module (by name) or a .py file that registers methods with "
+                "@codesign.methods.method; repeatable. Specs may also list `plugins = [...]` "
+                "and name a plain function as method = \"module:function\".")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -63,15 +67,22 @@ def main():
               help="Where runs execute: 'process' (local pool), 'dask-local' (a local dask cluster) "
                    "or 'dask://HOST:PORT' (a running dask scheduler).")
 @click.option("--progress/--no-progress", default=True, help="Show a progress bar.")
-def run(experiment, out, store_path, workers, executor, progress):
+@click.option("--plugin", "plugins", multiple=True, metavar="MODULE_OR_FILE", help=_PLUGIN_HELP)
+@click.option("--wait/--no-wait", default=True,
+              help="When another `compare run` is computing runs of this experiment on the same store: "
+                   "wait for them (default), or stop with exit code 2.")
+def run(experiment, out, store_path, workers, executor, progress, plugins, wait):
     """Run an experiment (a preset name or a TOML spec file), then write its report.
 
-    Runs already in the store are skipped, so an interrupted run resumes where it stopped.
+    Runs already in the store with the same code fingerprint are skipped, so an
+    interrupted run resumes where it stopped and an edited method reruns only its
+    own runs. Your own methods come in as plug-ins (--plugin, or `plugins` and
+    method = "module:function" in the spec); `compare methods --plugin ...` lists them.
     """
-    from .runner import ExecutorError, run_experiment
+    from .runner import ExecutorError, StoreBusy, run_experiment
 
     try:
-        spec = load_spec(experiment)
+        spec = load_spec(experiment, plugins=plugins)
     except SpecError as exc:
         raise UserError(str(exc)) from None
     if workers is not None and workers < 1:
@@ -82,8 +93,8 @@ def run(experiment, out, store_path, workers, executor, progress):
     with store:
         try:
             summary = run_experiment(spec, store, workers=workers, progress=progress,
-                                     executor=None if executor == "process" else executor)
-        except ExecutorError as exc:
+                                     executor=None if executor == "process" else executor, wait_for_others=wait)
+        except (ExecutorError, StoreBusy) as exc:
             raise UserError(str(exc)) from None
         except KeyboardInterrupt:
             click.echo(f"\ninterrupted: {len(store)} runs are stored in {store.path}; "
@@ -114,17 +125,22 @@ def report(out, store_path):
 
 
 @main.command()
-def methods():
-    """List the registered design methods."""
-    entries = registered_methods()
-    width = max(len(name) for name in entries)
-    for name, method in sorted(entries.items()):
-        params = ", ".join(
-            f"{p.name}={p.default!r}" for p in method.hyperparameters.values()
-        )
-        click.echo(f"{name:<{width}}  {method.summary}")
-        if params:
-            click.echo(f"{'':<{width}}  hyperparameters: {params}")
+@click.option("--plugin", "plugins", multiple=True, metavar="MODULE_OR_FILE", help=_PLUGIN_HELP)
+def methods(plugins):
+    """List the registered design methods, their hyperparameters and defaults."""
+    from .plugins import PluginError, load_plugins, parse_plugin
+    from .registry import methods as registered_methods
+
+    try:
+        load_plugins([parse_plugin(ref) for ref in plugins])
+    except PluginError as exc:
+        raise UserError(str(exc)) from None
+    for name, method in sorted(registered_methods().items()):
+        click.echo(f"{name}  ({method.label}): {method.summary}")
+        for h in method.hyperparameters.values():
+            doc = h.doc if len(h.doc) <= 90 else h.doc[:89].rstrip() + "…"
+            meaning = f"  {doc}" if doc else ""
+            click.echo(f"    {h.name}: {h.type_name} = {h.default!r}{meaning}")
 
 
 @main.command()

@@ -61,7 +61,7 @@ def panel_key(instance: dict) -> tuple:
 
 def panel_title(key: tuple) -> str:
     family, n, a_norm = key
-    return f"N = {n}, ‖A‖₂ = {a_norm:g}" if family == "paper" else f"{family}, N = {n}"
+    return f"N = {n}, ‖A‖₂ = {a_norm:g}" if np.isfinite(a_norm) else f"{family}, N = {n}"
 
 
 @dataclass(frozen=True)
@@ -142,26 +142,24 @@ def budget_costs(records: list[dict], budgets=(20, 60, 140, None)) -> dict:
     }
 
 
-_PLANT_CACHE: dict[str, int] = {}
+def plant_links(records: list[dict], facts: dict | None = None) -> dict:
+    """Median off-diagonal plant-graph links per panel: the QI boundary.
 
-
-def plant_links(records: list[dict]) -> dict:
-    """Median off-diagonal plant-graph links per panel (paper family): the QI boundary.
-
-    Below this many links no communication graph is quadratically invariant on the
-    paper's family, so no convex delay-constrained (SLS) design exists there.
+    Below this many links no communication graph relaying one hop per step is
+    quadratically invariant, so no convex delay-constrained (SLS) design exists
+    there. ``facts`` maps an instance's JSON to what the runner stored about it
+    (``plant_links``); instances without stored facts are rebuilt.
     """
-    from codesign import count_links, paper_instance
+    from codesign import count_links
 
+    from .runner import build_instance
+
+    facts = facts or {}
     per_panel = defaultdict(list)
     for inst in {json.dumps(r["instance"], sort_keys=True) for r in records}:
-        spec = json.loads(inst)
-        if spec.get("family") != "paper":
-            continue
-        if inst not in _PLANT_CACHE:
-            kwargs = {k: v for k, v in spec.items() if k != "family"}
-            _PLANT_CACHE[inst] = count_links(paper_instance(**kwargs).plant_adj)[0]
-        per_panel[panel_key(spec)].append(_PLANT_CACHE[inst])
+        if inst not in facts:
+            facts[inst] = {"plant_links": count_links(build_instance(json.loads(inst)).plant_adj)[0]}
+        per_panel[panel_key(json.loads(inst))].append(facts[inst]["plant_links"])
     return {panel: float(np.median(v)) for panel, v in per_panel.items()}
 
 
@@ -363,10 +361,27 @@ def _pareto_tables(points: list[Point]) -> list[str]:
     return lines
 
 
+def _fingerprint_lines(records: list[dict], meta: dict) -> list[str]:
+    """Which code produced the runs: one row per (method, fingerprint)."""
+    runs = defaultdict(set)
+    for r in records:
+        runs[(r["method"], r.get("fingerprint") or "—")].add(r["run_key"])
+    lines = ["## Code fingerprints", "",
+             "A run is reused from the store only while its fingerprint matches the code: the source of the "
+             "method's module and the project modules it uses, the evaluation code, and the versions of numpy, "
+             "scipy, cvxpy, clarabel and torch. `runs.csv` gives each run's fingerprint.", "",
+             "| method | fingerprint | runs | numerical packages |", "|---|---|---:|---|"]
+    for (method, fp), keys in sorted(runs.items()):
+        versions = meta.get(f"fingerprint:{fp}", {}).get("versions", {})
+        text = ", ".join(f"{k} {v}" for k, v in sorted(versions.items())) or "—"
+        lines.append(f"| {method} | `{fp}` | {len(keys)} | {text} |")
+    return lines + [""]
+
+
 def _write_csv(records: list[dict], path: Path) -> None:
     instance_keys = sorted({k for r in records for k in r["instance"]})
     columns = ["label", "method", "params", "status", "cost", "cost_stderr", "cost_kind", "links", "self_loops",
-               "info_model", "seconds", "message", "extras", "run_key", "idx"]
+               "info_model", "seconds", "message", "extras", "run_key", "idx", "fingerprint"]
     with path.open("w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow([f"instance_{k}" for k in instance_keys] + columns)
@@ -374,7 +389,7 @@ def _write_csv(records: list[dict], path: Path) -> None:
             scalars = {k: v for k, v in r["extras"].items() if isinstance(v, (int, float, str, bool))}
             row = [r["instance"].get(k, "") for k in instance_keys]
             for col in columns:
-                value = r[col]
+                value = r.get(col, "")
                 if col == "params":
                     value = json.dumps(value, sort_keys=True)
                 elif col == "extras":
@@ -394,46 +409,67 @@ def _save_figure(fig, out: Path, stem: str, files: dict) -> None:
     plt.close(fig)
 
 
-def _learning_sections(records: list[dict], out: Path, files: dict, load_controller) -> list[str]:
-    """Table 1 and training curves (from Table 1 experiments), and the topology path figure."""
+def _experiments_with(section: str, records: list[dict], meta: dict, members: dict) -> tuple[list[str], list[dict]]:
+    """The experiments that ask for ``section`` and the records of their runs."""
+    names = sorted(k.split(":", 1)[1] for k, v in meta.items() if k.startswith("sections:") and section in v)
+    keys = set().union(*(members.get(n, set()) for n in names)) if names else set()
+    # A store written before experiments recorded their members: a run belongs to the one that computed it.
+    unlisted = {n for n in names if not members.get(n)}
+    return names, [r for r in records if r["run_key"] in keys or r.get("experiment") in unlisted]
+
+
+def _producing(product: str, meta: dict) -> dict:
+    """Method name -> its stored declaration, for methods that declare ``product``."""
+    return {k.split(":", 1)[1]: v for k, v in meta.items() if k.startswith("method:") and product in v.get("produces", [])}
+
+
+def _learning_sections(records: list[dict], out: Path, files: dict, load_controller, meta: dict,
+                       members: dict) -> list[str]:
+    """Sections the data asks for: Table 1 and training curves of the experiments that declare them,
+    and the designed-topology path of a method that declares one."""
     from .learning_report import table1_markdown, training_curves_figure
+    from .runner import build_instance
     from .topologies import plot_topology_path, topology_path_records
 
     lines = []
-    table1 = [r for r in records if r.get("experiment", "").startswith("table1")]
+    names, table1 = _experiments_with("table1", records, meta, members)
     if table1:
-        names = ", ".join(sorted({r["experiment"] for r in table1}))
-        lines += ["## Table 1 (paper §IV-A)", "", f"From experiment {names}.", "", table1_markdown(table1), ""]
-        if any("curve" in r["extras"] for r in table1):
-            fig, _ = training_curves_figure(table1)
-            _save_figure(fig, out, "training_curves", files)
-            lines += ["### Training curves (paper Fig. 2)", "",
-                      "Median and 25–75 % band over instances of the selection-set cost during training.", "",
-                      "![training curves](training_curves.png)", ""]
-    path = topology_path_records(records)
+        lines += ["## Table 1 (paper §IV-A)", "", f"From experiment {', '.join(names)}.", "", table1_markdown(table1), ""]
+    names, curved = _experiments_with("training_curves", records, meta, members)
+    curved = [r for r in curved if r["method"] in _producing("training_curve", meta) and "curve" in r["extras"]]
+    if curved:
+        fig, _ = training_curves_figure(curved)
+        _save_figure(fig, out, "training_curves", files)
+        lines += ["### Training curves (paper Fig. 2)", "", f"From experiment {', '.join(names)}: median and "
+                  "25–75 % band over instances of the selection-set cost during training.", "",
+                  "![training curves](training_curves.png)", ""]
+    path = []
+    for name, declared in sorted(_producing("topology_path", meta).items()):
+        path = path or topology_path_records(records, method=name, weight=declared["path_param"])
     if len(path) >= 2 and load_controller is not None:
-        from codesign import paper_instance
-
         spec = {k: v for k, v in path[0]["instance"].items() if k != "family"}
+        weight = next(v["path_param"] for k, v in _producing("topology_path", meta).items() if k == path[0]["method"])
         entries = []
         for r in path:
             controller = load_controller(r["run_key"], r["idx"])
             support = getattr(controller, "support", None)
             if support is not None:
-                entries.append((r["params"]["beta"], r["links"], r["cost"], support))
+                entries.append((r["params"][weight], r["links"], r["cost"], support))
         if len(entries) >= 2:
-            fig, _ = plot_topology_path(paper_instance(**spec), entries)
+            fig, _ = plot_topology_path(build_instance(path[0]["instance"]), entries)
             _save_figure(fig, out, "topologies", files)
             inst = ", ".join(f"{k} = {v}" for k, v in spec.items())
-            lines += ["## Designed topologies along the β path (paper Fig. 4)", "",
-                      f"GRNN-Sparse on one instance ({inst}); nodes coloured by the magnitude of the leading "
-                      "eigenvector of A. Under each graph: the ℓ1 weight β, the directed off-diagonal links "
+            symbol = "β" if weight == "beta" else weight
+            lines += [f"## Designed topologies along the {symbol} path (paper Fig. 4)", "",
+                      f"{path[0]['label']} on one instance ({inst}); nodes coloured by the magnitude of the leading "
+                      f"eigenvector of A. Under each graph: the weight {symbol}, the directed off-diagonal links "
                       "|E| and the normalized cost J.", "", "![designed topologies](topologies.png)", ""]
     return lines
 
 
 def write_report(records: list[dict], out, *, specs: dict | None = None, title: str = "Comparison report",
-                 commands: list[str] | None = None, load_controller=None) -> dict[str, Path]:
+                 commands: list[str] | None = None, load_controller=None, meta: dict | None = None,
+                 members: dict | None = None) -> dict[str, Path]:
     """Write ``cost_vs_links.png/.svg``, ``runs.csv`` and ``report.md`` into ``out``.
 
     Parameters
@@ -451,6 +487,12 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     load_controller : callable, optional
         ``(run_key, idx) -> controller`` (e.g. :meth:`Store.controller`), for the
         designed-topology figure.
+    meta : dict, optional
+        :meth:`Store.meta`: the sections each experiment asks for, what each method
+        declares it produces, code fingerprints and stored instance facts. Sections
+        come from these declarations only.
+    members : dict, optional
+        :meth:`Store.members`: experiment name -> its run keys.
 
     Returns
     -------
@@ -460,8 +502,10 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     records = sorted(records, key=lambda r: (json.dumps(r["instance"], sort_keys=True), r["label"], r["run_key"], r["idx"]))
+    meta, members = dict(meta or {}), dict(members or {})
     points = aggregate(records)
-    boundaries = plant_links(records)
+    facts = {k.split(":", 1)[1]: v for k, v in meta.items() if k.startswith("instance:")}
+    boundaries = plant_links(records, facts)
     files = {}
     fig, _ = plot_cost_vs_links(points, boundaries=boundaries)
     _save_figure(fig, out, "cost_vs_links", files)
@@ -512,7 +556,8 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
                   "links: below it no communication graph relaying one hop per step is quadratically "
                   "invariant on this family, so no convex delay-constrained design with the GRNN's "
                   "information model exists there (DESIGN.md §5).", ""]
-    lines += _learning_sections(records, out, files, load_controller)
+    lines += _learning_sections(records, out, files, load_controller, meta, members)
+    lines += _fingerprint_lines(records, meta)
     lines += ["## Runs by status", "", "| status | designs |", "|---|---:|"]
     lines += [f"| {status} | {count} |" for status, count in sorted(statuses.items())]
     failures = [r for r in records if r["status"] != "optimal"]

@@ -8,18 +8,23 @@ store are skipped, so an interrupted sweep resumes where it stopped.
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import os
 import time
+import uuid
 from collections import Counter
 from concurrent.futures import FIRST_COMPLETED, Executor, ProcessPoolExecutor, wait
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from tqdm.auto import tqdm
 
-from codesign import Design, exact_cost, paper_instance, simulate, validation_set
+from codesign import Design, count_links, paper_instance
+from codesign.scoring import evaluate
 
+from .fingerprint import fingerprint_details
+from .plugins import load_plugins
 from .registry import get_method
 from .spec import ExperimentSpec, Run
 from .store import Store
@@ -33,6 +38,8 @@ __all__ = [
     "RunSummary",
     "make_executor",
     "open_executor",
+    "StoreBusy",
+    "instance_facts",
 ]
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
@@ -47,31 +54,15 @@ def build_instance(instance_spec: dict):
     return paper_instance(**kwargs)
 
 
-def _noise_cost(instance, design: Design, evaluation) -> tuple[float, float]:
-    exact = exact_cost(instance, design.controller, noise_std=evaluation.noise_std)
-    if exact is not None:
-        return exact, 0.0
-    rollout = simulate(
-        instance,
-        design.controller,
-        validation_set(instance, evaluation.validation_size),
-        noise_std=evaluation.noise_std,
-        seed=instance.seed,
-    )
-    return rollout.cost, rollout.stderr
+def instance_facts(instance) -> dict:
+    """What a report needs to know about an instance without rebuilding it."""
+    return {"n": int(instance.n), "plant_links": count_links(instance.plant_adj)[0],
+            "comm_links": count_links(instance.comm_adj)[0]}
 
 
-def _score_noise(instance, designs: list[Design], evaluation) -> list[Design]:
-    if evaluation.noise_std <= 0:
-        return designs
-    scored = []
-    for design in designs:
-        if design.controller is not None and design.status in ("optimal", "inaccurate"):
-            cost, stderr = _noise_cost(instance, design, evaluation)
-            extras = dict(design.extras, noise_std=evaluation.noise_std, noise_cost=cost, noise_cost_stderr=stderr)
-            design = replace(design, extras=extras)
-        scored.append(design)
-    return scored
+def _evaluated(instance, designs, evaluation) -> list[Design]:
+    return [evaluate(instance, d, validation_size=evaluation.validation_size, noise_std=evaluation.noise_std)
+            for d in designs]
 
 
 def _failed(run: Run, exc: Exception) -> list[Design]:
@@ -79,23 +70,26 @@ def _failed(run: Run, exc: Exception) -> list[Design]:
 
 
 def execute_run(run: Run) -> tuple[list[Design], float]:
-    """Run one method on one instance; any exception becomes a ``failed`` design."""
+    """Run one method on one instance and score its designs; any exception becomes a ``failed`` design."""
     start = time.perf_counter()
     try:
         instance = build_instance(run.instance)
-        designs = _score_noise(instance, get_method(run.method)(instance, **run.params), run.evaluation)
+        designs = _evaluated(instance, get_method(run.method)(instance, **run.params), run.evaluation)
     except Exception as exc:  # a failing method is a recorded status, never a crashed sweep
         designs = _failed(run, exc)
     return designs, time.perf_counter() - start
 
 
-def execute_task(runs: list[Run]) -> list[tuple[list[Design], float]]:
+def execute_task(runs: list[Run], plugins=()) -> list[tuple[list[Design], float]]:
     """Run a group of runs of one method; a batched method designs them in one call.
 
-    Returns ``(designs, seconds)`` per run, in order; the seconds of a batched call
-    are shared equally. If the batched call fails as a whole, each run is retried
+    ``plugins`` are imported first (once per process), so that worker processes
+    know the same user methods as the process that planned the runs. Returns
+    ``(designs, seconds)`` per run, in order; the seconds of a batched call are
+    shared equally. If the batched call fails as a whole, each run is retried
     alone so that one bad run cannot fail its neighbours.
     """
+    load_plugins(plugins)
     method = get_method(runs[0].method)
     if len(runs) == 1 or method.batch is None:
         return [execute_run(run) for run in runs]
@@ -103,7 +97,7 @@ def execute_task(runs: list[Run]) -> list[tuple[list[Design], float]]:
     try:
         instances = [build_instance(run.instance) for run in runs]
         results = method.run_batch([(inst, run.params) for inst, run in zip(instances, runs)])
-        results = [_score_noise(inst, designs, run.evaluation) for inst, designs, run in zip(instances, results, runs)]
+        results = [_evaluated(inst, designs, run.evaluation) for inst, designs, run in zip(instances, results, runs)]
     except Exception:
         return [execute_run(run) for run in runs]
     share = (time.perf_counter() - start) / len(runs)
@@ -213,20 +207,27 @@ class RunSummary:
     total: int
     already_stored: int
     computed: int = 0
+    by_others: int = 0
     statuses: Counter = field(default_factory=Counter)
     seconds: float = 0.0
 
     def __str__(self) -> str:
         failed = {k: v for k, v in self.statuses.items() if k != "optimal"}
         parts = [f"{self.total} runs: {self.computed} computed, {self.already_stored} already stored"]
+        if self.by_others:
+            parts[0] += f", {self.by_others} computed by another process"
         if failed:
             parts.append("non-optimal designs: " + ", ".join(f"{v} {k}" for k, v in sorted(failed.items())))
         parts.append(f"{self.seconds:.1f} s")
         return "; ".join(parts)
 
 
-def _drain(pool: Executor, tasks: list[list[Run]], record) -> None:
-    futures = {pool.submit(execute_task, task): task for task in tasks}
+class StoreBusy(RuntimeError):
+    """Runs of the experiment are being computed by another process and ``wait`` is False."""
+
+
+def _drain(pool: Executor, tasks: list[list[Run]], plugins, record) -> None:
+    futures = {pool.submit(execute_task, task, plugins): task for task in tasks}
     try:
         remaining = set(futures)
         while remaining:
@@ -240,6 +241,29 @@ def _drain(pool: Executor, tasks: list[list[Run]], record) -> None:
         raise
 
 
+def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store) -> None:
+    """Store what the report needs beside the runs: the spec, methods, fingerprints and instance facts."""
+    store.set_meta(f"spec:{spec.name}", spec.source)
+    store.set_meta(f"sections:{spec.name}", list(spec.sections))
+    store.add_members(spec.name, [run.key for run in runs])
+    for name in dict.fromkeys(run.method for run in runs):
+        m = get_method(name)
+        details = fingerprint_details(m.modules)
+        store.set_meta(f"method:{name}", {"label": m.label, "summary": m.summary, "produces": list(m.produces),
+                                          "path_param": m.path_param, "fingerprint": details["fingerprint"]})
+        store.set_meta(f"fingerprint:{details['fingerprint']}", {"modules": details["modules"],
+                                                                 "versions": details["versions"]})
+    known = {k for k in store.meta() if k.startswith("instance:")}
+    for spec_dict in {json.dumps(run.instance, sort_keys=True): run.instance for run in runs}.values():
+        key = "instance:" + json.dumps(spec_dict, sort_keys=True)
+        if key not in known:
+            try:
+                facts = instance_facts(build_instance(spec_dict))
+            except Exception:  # the instance's runs record the failure; the report rebuilds what it needs
+                continue
+            store.set_meta(key, facts)
+
+
 def run_experiment(
     spec: ExperimentSpec,
     store: Store,
@@ -247,6 +271,8 @@ def run_experiment(
     workers: int = 1,
     executor: Executor | str | None = None,
     progress: bool = True,
+    wait_for_others: bool = True,
+    poll: float = 1.0,
 ) -> RunSummary:
     """Execute every run of ``spec`` not yet in ``store``.
 
@@ -263,36 +289,65 @@ def run_experiment(
         local process pool of ``workers`` processes (none when ``workers == 1``).
     progress : bool
         Show a tqdm progress bar.
+    wait_for_others : bool
+        Runs that another live process has claimed on the same store are left to
+        it; True waits for them (so the report is complete), False raises
+        :class:`StoreBusy` once this process has computed its own share.
+    poll : float
+        Seconds between looks at the store while waiting.
     """
     start = time.perf_counter()
     runs = list({run.key: run for run in spec.runs()}.values())
+    _record_meta(spec, runs, store)
     done = store.done_keys()
     pending = [run for run in runs if run.key not in done]
     store.relabel({run.key: run.label for run in runs if run.key in done})
     summary = RunSummary(total=len(runs), already_stored=len(runs) - len(pending))
-    store.set_meta(f"spec:{spec.name}", spec.source)
     bar = tqdm(total=len(pending), desc=f"{spec.name}", unit="run", disable=not progress or not pending)
+    owner = uuid.uuid4().hex
 
     def record(run, designs, seconds):
-        store.add_run(run, designs, experiment=spec.name, seconds=seconds)
+        store.add_run(run, designs, experiment=spec.name, seconds=seconds, owner=owner)
         summary.computed += 1
         summary.statuses.update(d.status for d in designs)
         bar.update(1)
 
-    try:
-        if not pending:
-            pass
-        elif executor is None and workers <= 1:
-            for task in plan_tasks(pending):
+    def compute(todo):
+        tasks = plan_tasks(todo)
+        if executor is None and workers <= 1:
+            for task in tasks:
                 for run, result in zip(task, execute_task(task)):
                     record(run, *result)
         elif isinstance(executor, Executor):
-            _drain(executor, plan_tasks(pending), record)
+            _drain(executor, tasks, spec.plugins, record)
         else:
             with open_executor(executor or "process", workers) as pool:
-                _drain(pool, plan_tasks(pending), record)
+                _drain(pool, tasks, spec.plugins, record)
+
+    told = False
+    try:
+        while pending:
+            mine = set(store.claim([run.key for run in pending], owner))
+            if mine:
+                compute([run for run in pending if run.key in mine])
+            stored = store.done_keys()
+            left = [run for run in pending if run.key not in stored]
+            summary.by_others += len(pending) - len(left) - len(mine & stored)
+            bar.update(len(pending) - len(left) - len(mine & stored))
+            pending = left
+            if not pending:
+                break
+            others = {store.claims().get(run.key, (None, "?", 0))[1:] for run in pending}
+            where = ", ".join(f"pid {pid} on {host}" for host, pid in sorted(others))
+            if not wait_for_others:
+                raise StoreBusy(f"{len(pending)} runs are being computed by another process ({where}) "
+                                f"on {store.path}; run again when it has finished")
+            if not told:
+                bar.write(f"waiting for {len(pending)} runs being computed by another process ({where})")
+                told = True
+            time.sleep(poll)
     finally:
+        store.release(owner)
         bar.close()
         summary.seconds = time.perf_counter() - start
     return summary
-

@@ -13,6 +13,11 @@ their hyperparameters and grids, and evaluation settings. It expands into
     a_norms = [0.995, 1.05]
     seeds = 10                   # seeds 0..9, or an explicit list [0, 4, 7]
 
+    plugins = ["my_methods", "more_methods.py"]   # optional: modules registering methods
+
+    [report]
+    sections = ["table1", "training_curves"]       # optional report sections this experiment asks for
+
     [evaluation]
     validation_size = 1000
     noise_std = 0.0
@@ -26,6 +31,9 @@ their hyperparameters and grids, and evaluation settings. It expands into
     params = { start = "lqr_diagonal" }
     grid = { }                   # lists of values, expanded as a cartesian product
     where = { a_norm = [1.05] }  # optional: only on instances with these field values
+
+    [[methods]]
+    method = "my_methods:trunc10"   # a plain function f(instance, *, ...) in a module or a .py file
 """
 
 from __future__ import annotations
@@ -43,6 +51,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+from .fingerprint import fingerprint
+from .plugins import Plugin, PluginError, load_plugins, parse_plugin
 from .registry import UnknownMethodError, get_method
 
 __all__ = [
@@ -55,7 +65,11 @@ __all__ = [
     "load_spec",
     "parse_spec",
     "preset_names",
+    "SECTIONS",
 ]
+
+#: Report sections an experiment may ask for (``[report] sections``).
+SECTIONS = ("table1", "training_curves")
 
 
 class SpecError(ValueError):
@@ -146,17 +160,20 @@ class Run:
     label: str
     params: dict
     evaluation: EvaluationSpec
-    version: str
+    fingerprint: str
 
     @property
     def key(self) -> str:
-        """Content hash of (instance spec, method, hyperparameters, package version)."""
+        """Content hash of (instance spec, method, hyperparameters, evaluation, code fingerprint).
+
+        Keys are sorted before hashing, so the order of keys in a spec never changes a key.
+        """
         payload = {
             "instance": self.instance,
             "method": self.method,
             "params": self.params,
             "evaluation": {"noise_std": self.evaluation.noise_std, "validation_size": self.evaluation.validation_size},
-            "version": self.version,
+            "fingerprint": self.fingerprint,
         }
         text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:32]
@@ -172,13 +189,15 @@ class ExperimentSpec:
     methods: tuple[MethodSpec, ...]
     evaluation: EvaluationSpec
     source: str = ""
+    plugins: tuple = ()
+    sections: tuple = ()
 
-    def runs(self, version: str | None = None) -> list[Run]:
-        """Every run of the experiment, instance-major."""
-        if version is None:
-            from codesign import __version__ as version
+    def runs(self) -> list[Run]:
+        """Every run of the experiment, instance-major, keyed with its method's code fingerprint."""
+        load_plugins(self.plugins)
+        prints = {m.method: fingerprint(get_method(m.method)) for m in self.methods}
         return [
-            Run(instance, m.method, m.label, params, self.evaluation, version)
+            Run(instance, m.method, m.label, params, self.evaluation, prints[m.method])
             for instance in self.instances.expand()
             for m in self.methods
             if m.applies_to(instance)
@@ -192,30 +211,55 @@ def preset_names() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
-def load_spec(name_or_path: str | Path) -> ExperimentSpec:
-    """Load a preset by name (``"quick"``) or a spec from a TOML file path."""
+def load_spec(name_or_path: str | Path, *, plugins=()) -> ExperimentSpec:
+    """Load a preset by name (``"quick"``) or a spec from a TOML file path.
+
+    ``plugins`` adds plug-in modules or files (as ``compare run --plugin``) to the spec's own.
+    """
     text_path = Path(name_or_path)
     if text_path.suffix == ".toml" or text_path.exists():
         if not text_path.is_file():
             raise SpecError(f"spec file not found: {text_path}")
         text = text_path.read_text()
         default_name = text_path.stem
+        base = text_path.resolve().parent
     else:
         name = str(name_or_path)
         if name not in preset_names():
             raise SpecError(f"unknown preset {name!r}; presets: {', '.join(preset_names())} (or give a .toml file)")
         text = (resources.files("compare") / "presets" / f"{name}.toml").read_text()
         default_name = name
-    return parse_spec(text, default_name=default_name)
+        base = None
+    return parse_spec(text, default_name=default_name, base=base, plugins=plugins)
 
 
-def parse_spec(text: str, *, default_name: str = "experiment") -> ExperimentSpec:
-    """Parse and validate TOML text into an :class:`ExperimentSpec`."""
+def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path | None = None,
+               plugins=()) -> ExperimentSpec:
+    """Parse and validate TOML text into an :class:`ExperimentSpec`.
+
+    ``base`` is the folder that relative plug-in paths are resolved against (the
+    spec file's folder; by default the working folder); ``plugins`` are extra
+    plug-in references imported before the methods are looked up.
+    """
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(f"spec is not valid TOML: {exc}") from None
-    _check_keys("spec", data, {"name", "description", "instances", "methods", "evaluation"})
+    _check_keys("spec", data, {"name", "description", "instances", "methods", "evaluation", "plugins", "report"})
+    refs = [("--plugin", ref) for ref in plugins]
+    raw_plugins = data.get("plugins", [])
+    if not isinstance(raw_plugins, list):
+        raise SpecError(f"plugins: expected a list of module names or .py files, got {raw_plugins!r}")
+    refs += [(f"plugins[{i}]", _typed(f"plugins[{i}]", ref, str)) for i, ref in enumerate(raw_plugins)]
+    loaded = []
+    for where, ref in refs:
+        try:
+            plugin = parse_plugin(ref, base=base if where != "--plugin" else None)
+            load_plugins([plugin])
+        except PluginError as exc:
+            raise SpecError(f"{where}: {exc}") from None
+        loaded.append(plugin)
+    sections = _parse_report(_typed("report", data.get("report", {}), dict))
     name = _typed("name", data.get("name", default_name), str)
     description = _typed("description", data.get("description", ""), str)
     if "instances" not in data:
@@ -225,8 +269,19 @@ def parse_spec(text: str, *, default_name: str = "experiment") -> ExperimentSpec
     raw_methods = _typed("methods", data.get("methods", []), list)
     if not raw_methods:
         raise SpecError("methods: the spec needs at least one [[methods]] entry")
-    methods = tuple(_parse_method(i, entry) for i, entry in enumerate(raw_methods))
-    return ExperimentSpec(name, description, instances, methods, evaluation, text)
+    methods = tuple(_parse_method(i, entry, base, loaded) for i, entry in enumerate(raw_methods))
+    return ExperimentSpec(name, description, instances, methods, evaluation, text, tuple(loaded), sections)
+
+
+def _parse_report(table: dict) -> tuple:
+    _check_keys("report", table, {"sections"})
+    sections = table.get("sections", [])
+    if not isinstance(sections, list):
+        raise SpecError(f"report.sections: expected a list, got {sections!r}")
+    for i, name in enumerate(sections):
+        if name not in SECTIONS:
+            raise SpecError(f"report.sections[{i}]: unknown section {name!r} (known: {', '.join(SECTIONS)})")
+    return tuple(sections)
 
 
 def _check_keys(where: str, table: dict, allowed: set) -> None:
@@ -306,13 +361,20 @@ def _parse_evaluation(table: dict) -> EvaluationSpec:
     return EvaluationSpec(size, noise)
 
 
-def _parse_method(index: int, entry) -> MethodSpec:
+def _parse_method(index: int, entry, base, plugins: list) -> MethodSpec:
     where = f"methods[{index}]"
     entry = _typed(where, entry, dict)
     _check_keys(where, entry, {"method", "label", "params", "grid", "where"})
     if "method" not in entry:
         raise SpecError(f"{where}.method: missing (which registered method to run)")
     name = _typed(f"{where}.method", entry["method"], str)
+    if ":" in name:
+        try:
+            plugin = parse_plugin(name, base=base, function=True)
+            load_plugins([plugin])
+        except PluginError as exc:
+            raise SpecError(f"{where}.method: {exc}") from None
+        plugins.append(plugin)
     try:
         method = get_method(name)
     except UnknownMethodError as exc:

@@ -4,13 +4,22 @@ Each finished run is written in a single transaction (its run row and all its
 designs), so a run killed mid-write leaves nothing behind and a rerun finds
 every completed run. Controllers are stored as ``.npz`` blobs (numpy arrays
 only, loaded with ``allow_pickle=False``), never as pickles.
+
+Several ``compare run`` processes may fill one store at once: a process claims
+the runs it will compute (one transaction, so no run is claimed twice) and
+leaves runs claimed by a live process to it. Claims of a process that died (on
+this host: its pid is gone; elsewhere: no heartbeat for :data:`STALE_SECONDS`)
+are taken over.
 """
 
 from __future__ import annotations
 
 import io
 import json
+import os
+import socket
 import sqlite3
+import time
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +61,32 @@ CREATE TABLE IF NOT EXISTS designs (
     extras TEXT,
     PRIMARY KEY (run_key, idx)
 );
+CREATE TABLE IF NOT EXISTS claims (
+    run_key TEXT PRIMARY KEY,
+    owner TEXT NOT NULL,
+    host TEXT NOT NULL,
+    pid INTEGER NOT NULL,
+    heartbeat REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS members (
+    experiment TEXT NOT NULL,
+    run_key TEXT NOT NULL,
+    PRIMARY KEY (experiment, run_key)
+);
 """
+
+#: A claim from another host with no heartbeat for this long is taken over.
+STALE_SECONDS = 6 * 3600.0
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # pragma: no cover - someone else's live process
+        return True
+    return True
 
 
 class StoreError(RuntimeError):
@@ -104,8 +138,46 @@ class Store:
         with self._conn:
             self._conn.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value, sort_keys=True)))
 
-    def add_run(self, run, designs, *, experiment: str, seconds: float) -> bool:
-        """Store a finished run and its designs atomically; False if it was already stored."""
+    def add_members(self, experiment: str, keys) -> None:
+        """Record which runs make up an experiment (a run may belong to several)."""
+        with self._conn:
+            self._conn.executemany("INSERT OR IGNORE INTO members VALUES (?, ?)", [(experiment, k) for k in keys])
+
+    def claim(self, keys, owner: str) -> list[str]:
+        """Claim the runs among ``keys`` that are neither stored nor claimed by a live process.
+
+        Returns the keys now claimed by ``owner``, in order. One immediate
+        transaction, so two processes never claim the same run.
+        """
+        host, pid, now = socket.gethostname(), os.getpid(), time.time()
+        with self._conn:
+            self._conn.execute("BEGIN IMMEDIATE")
+            for key, other_host, other_pid, beat in self._conn.execute(
+                    "SELECT run_key, host, pid, heartbeat FROM claims WHERE owner != ?", (owner,)).fetchall():
+                dead = not _alive(other_pid) if other_host == host else now - beat > STALE_SECONDS
+                if dead:
+                    self._conn.execute("DELETE FROM claims WHERE run_key = ?", (key,))
+            taken = {row[0] for row in self._conn.execute("SELECT run_key FROM claims WHERE owner != ?", (owner,))}
+            taken |= self.done_keys()
+            mine = [k for k in dict.fromkeys(keys) if k not in taken]
+            self._conn.executemany("INSERT OR REPLACE INTO claims VALUES (?, ?, ?, ?, ?)",
+                                   [(k, owner, host, pid, now) for k in mine])
+        return mine
+
+    def claims(self) -> dict[str, tuple[str, str, int]]:
+        """Runs claimed and not yet stored: ``run_key -> (owner, host, pid)``."""
+        return {k: (o, h, p) for k, o, h, p in self._conn.execute("SELECT run_key, owner, host, pid FROM claims")}
+
+    def release(self, owner: str) -> None:
+        """Drop ``owner``'s remaining claims (runs it did not finish)."""
+        with self._conn:
+            self._conn.execute("DELETE FROM claims WHERE owner = ?", (owner,))
+
+    def add_run(self, run, designs, *, experiment: str, seconds: float, owner: str | None = None) -> bool:
+        """Store a finished run and its designs atomically; False if it was already stored.
+
+        The run's claim goes in the same transaction; ``owner``'s other claims get a heartbeat.
+        """
         rows = []
         for idx, design in enumerate(designs):
             record = design.to_record()
@@ -124,12 +196,15 @@ class Store:
                 "INSERT OR IGNORE INTO runs VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (
                     run.key, experiment, json.dumps(run.instance, sort_keys=True), run.method, run.label,
-                    json.dumps(run.params, sort_keys=True), run.version, len(rows), float(seconds),
+                    json.dumps(run.params, sort_keys=True), run.fingerprint, len(rows), float(seconds),
                 ),
             )
             if cursor.rowcount == 0:
                 return False
             self._conn.executemany(f"INSERT INTO designs VALUES ({', '.join('?' * 17)})", rows)
+            self._conn.execute("DELETE FROM claims WHERE run_key = ?", (run.key,))
+            if owner is not None:
+                self._conn.execute("UPDATE claims SET heartbeat = ? WHERE owner = ?", (time.time(), owner))
         return True
 
     def relabel(self, labels: dict[str, str]) -> int:
@@ -154,6 +229,13 @@ class Store:
     def meta(self) -> dict:
         return {k: json.loads(v) for k, v in self._conn.execute("SELECT key, value FROM meta")}
 
+    def members(self) -> dict[str, set]:
+        """Experiment name -> the run keys that make it up."""
+        out: dict[str, set] = {}
+        for experiment, key in self._conn.execute("SELECT experiment, run_key FROM members"):
+            out.setdefault(experiment, set()).add(key)
+        return out
+
     def __len__(self) -> int:
         return self._conn.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
 
@@ -162,14 +244,14 @@ class Store:
         query = """
             SELECT d.run_key, d.idx, r.experiment, r.instance, d.method, d.label, d.params, d.cost,
                    d.cost_stderr, d.cost_kind, d.links, d.self_loops, d.info_model, d.status, d.message,
-                   d.seconds, d.controller_kind, d.extras
+                   d.seconds, d.controller_kind, d.extras, r.version
             FROM designs d JOIN runs r USING (run_key)
             ORDER BY r.instance, d.label, d.run_key, d.idx
         """
         cols = [
             "run_key", "idx", "experiment", "instance", "method", "label", "params", "cost", "cost_stderr",
             "cost_kind", "links", "self_loops", "info_model", "status", "message", "seconds",
-            "controller_kind", "extras",
+            "controller_kind", "extras", "fingerprint",
         ]
         out = []
         for row in self._conn.execute(query):

@@ -54,7 +54,8 @@ def test_stacked_gcnn_equals_single_runs(inst):
 def test_registered_with_batch_hook(inst):
     method = get_method("gcnn")
     assert method.label == "GCNN"
-    out = method.func.batch([(inst, {"steps": 4, "ensemble": 1, "stability_steps": 0})])
+    assert method.batch is not None and "training_curve" in method.produces
+    out = method.run_batch([(inst, {"steps": 4, "ensemble": 1, "stability_steps": 0})])
     assert len(out) == 1 and out[0][0].method == "gcnn"
 
 

@@ -194,10 +194,10 @@ def test_co_design_settings_are_rejected_by_the_other_variants(inst, name):
         assert key not in method.hyperparameters
         with pytest.raises(ValueError, match=f"params.{key}: unknown hyperparameter"):
             method.check_params({key: 1})
-    with pytest.raises(TypeError, match="grnn_sparse only"):
-        method.func(inst, threshold=0.1, steps=1)
-    with pytest.raises(TypeError, match="threshold"):
-        method.batch([(inst, {"threshold": 0.1, "steps": 1})])
+    with pytest.raises(ValueError, match="params.threshold: unknown hyperparameter"):
+        method(inst, threshold=0.1, steps=1)
+    with pytest.raises(ValueError, match="params.threshold: unknown hyperparameter"):
+        method.run_batch([(inst, {"threshold": 0.1, "steps": 1})])
     assert "threshold" in get_method("grnn_sparse").hyperparameters
 
 

@@ -144,10 +144,19 @@ PLAIN_L1_LOSES_TO_TRUNCATION = {
 }
 
 
+#: Known losses that are near-ties decided by floating-point rounding: on some CPUs
+#: (BLAS kernels) the ADMM picks truncation's pattern and the test passes. Measured:
+#: (1.05, 0) fails on the machine that recorded it and passes on another 2-core machine
+#: with the same package versions, so it cannot be a strict xfail.
+ROUNDING_DEPENDENT = {(1.05, 0)}
+
+
 def _expect_known_loss(request, instance, known_losses=ADMM_LOSES_TO_TRUNCATION):
-    known = known_losses.get((instance.spec["a_norm"], instance.spec["seed"]))
+    key = (instance.spec["a_norm"], instance.spec["seed"])
+    known = known_losses.get(key)
     if known:
-        request.applymarker(pytest.mark.xfail(strict=True, raises=AssertionError, reason=known))
+        strict = key not in ROUNDING_DEPENDENT
+        request.applymarker(pytest.mark.xfail(strict=strict, raises=AssertionError, reason=known))
 
 
 def test_admm_matches_or_beats_truncated_lqr(instance, paths, request):

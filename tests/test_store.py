@@ -97,7 +97,7 @@ def test_method_exception_becomes_failed_design(tmp_path, monkeypatch):
 
 def test_batched_methods_get_grouped_runs_and_store_per_run(tmp_path, monkeypatch):
     import baselines
-    from compare import registry
+    from codesign import methods as registry
 
     calls = []
 
@@ -105,13 +105,13 @@ def test_batched_methods_get_grouped_runs_and_store_per_run(tmp_path, monkeypatc
         calls.append(len(pairs))
         return [baselines.decentralized(inst, **params) for inst, params in pairs]
 
-    monkeypatch.setitem(registry._REGISTRY, "decentralized_batched", registry.Method(
-        "decentralized_batched", baselines.decentralized, "test", "D", batch, 4))
+    monkeypatch.setitem(registry._REGISTRY, "decentralized_batched", registry.Method.from_function(
+        baselines.decentralized, name="decentralized_batched", label="D", batch=batch, batch_size=4))
     spec = parse_spec(SPEC.replace('method = "decentralized"', 'method = "decentralized_batched"')
                       .replace("seeds = 3", "seeds = 6"))
     with Store(tmp_path / "b.sqlite") as store:
         run_experiment(spec, store, progress=False)
-        batched = sorted(r["cost"] for r in store.records() if r["method"] == "decentralized")
+        batched = sorted(r["cost"] for r in store.records() if r["method"] == "decentralized_batched")
     assert sorted(calls) == [2, 4]
     with Store(tmp_path / "p.sqlite") as store:
         run_experiment(parse_spec(SPEC.replace("seeds = 3", "seeds = 6")), store, progress=False)

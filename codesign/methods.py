@@ -1,0 +1,392 @@
+"""Design methods: one object per method, registered by a decorator in the method's own module.
+
+A method is a function ``f(instance, *, **hyperparameters) -> Design | list[Design]``
+with keyword-only hyperparameters (their defaults and annotations are the method's
+one table of settings). The :func:`method` decorator wraps it in a frozen
+:class:`Method` and registers it by name::
+
+    from codesign.methods import method
+    from codesign.scoring import score
+
+    @method("trunc10", label="Truncated LQR (10 links)")
+    def trunc10(instance, *, links: int = 10):
+        ...
+        return score(instance, StaticGain(K))
+
+The decorated function is returned unchanged, so it stays an ordinary function
+for notebooks. Calling the :class:`Method` checks the hyperparameters, runs the
+function and stamps the method's name into every returned :class:`Design`
+(a method never types its own name). This follows benchopt's one-file solvers and
+pymanopt's split between an optimizer and its frozen result.
+"""
+
+from __future__ import annotations
+
+import inspect
+import types
+import typing
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable
+
+from .design import Design
+
+__all__ = [
+    "Method",
+    "Hyperparameter",
+    "method",
+    "register",
+    "get_method",
+    "registered_methods",
+    "UnknownMethodError",
+    "PRODUCTS",
+]
+
+#: What a method may declare that its designs carry, so a report can give it a section:
+#: ``training_curve`` (``extras["curve"] = {"step": [...], "cost": [...]}``) and
+#: ``topology_path`` (designs along ``path_param`` whose controllers expose ``support``).
+PRODUCTS = ("training_curve", "topology_path")
+
+
+class UnknownMethodError(KeyError):
+    """A method name that is not registered."""
+
+    def __str__(self):
+        return str(self.args[0])
+
+
+@dataclass(frozen=True)
+class Hyperparameter:
+    """One keyword-only hyperparameter: its name, default, annotation and one-line meaning."""
+
+    name: str
+    default: Any
+    annotation: Any = Any
+    doc: str = ""
+
+    @property
+    def type_name(self) -> str:
+        return _type_name(self.annotation)
+
+    def check(self, value, where: str) -> None:
+        """Raise ValueError naming ``where`` when ``value`` does not fit the annotation."""
+        if not _fits(value, self.annotation):
+            raise ValueError(f"{where}: expected {self.type_name}, got {type(value).__name__} {value!r}")
+
+
+@dataclass(frozen=True)
+class Method:
+    """A registered design method.
+
+    Attributes
+    ----------
+    name : str
+        The name used in specs and on the CLI.
+    design : callable
+        ``design(instance, **params) -> Design | list[Design]``.
+    label : str
+        Legend label (a spec entry may override it).
+    summary : str
+        One line for ``compare methods``.
+    hyperparameters : dict of str to Hyperparameter
+        The one defaults table: every keyword the method accepts.
+    batch : callable, optional
+        ``batch(pairs) -> list`` designing many ``(instance, params)`` pairs in one
+        call (one ``Design`` or list of them per pair, in order), so that e.g. many
+        GRNNs train as one batched program.
+    batch_size : int
+        How many runs the runner hands ``batch`` at once.
+    produces : tuple of str
+        Entries of :data:`PRODUCTS` the designs carry (report sections).
+    path_param : str, optional
+        The hyperparameter a ``topology_path`` runs along (e.g. ``"beta"``).
+    modules : tuple of str
+        Modules whose source defines the method (for the code fingerprint).
+    """
+
+    name: str
+    design: Callable
+    label: str
+    summary: str
+    hyperparameters: dict = field(default_factory=dict)
+    batch: Callable | None = None
+    batch_size: int = 64
+    produces: tuple = ()
+    path_param: str | None = None
+    modules: tuple = ()
+
+    def __post_init__(self):
+        unknown = set(self.produces) - set(PRODUCTS)
+        if unknown:
+            raise ValueError(f"method {self.name!r}: unknown products {sorted(unknown)} (known: {', '.join(PRODUCTS)})")
+
+    @property
+    def defaults(self) -> dict:
+        """Hyperparameter name -> default."""
+        return {name: h.default for name, h in self.hyperparameters.items()}
+
+    @classmethod
+    def from_function(
+        cls,
+        func: Callable,
+        *,
+        name: str | None = None,
+        label: str | None = None,
+        summary: str | None = None,
+        bind: dict | None = None,
+        exclude: tuple = (),
+        batch: Callable | None = None,
+        batch_size: int = 64,
+        produces: tuple = (),
+        path_param: str | None = None,
+    ) -> "Method":
+        """A method from a function's keyword-only parameters.
+
+        ``bind`` fixes some keywords (e.g. a variant) and removes them from the
+        hyperparameters, like ``exclude``. Raises TypeError when the function does
+        not take an instance and keyword-only hyperparameters.
+        """
+        name = name or func.__name__
+        bind = dict(bind or {})
+        hyper = _hyperparameters(func, name, dropped=set(bind) | set(exclude))
+        doc = inspect.getdoc(func) or ""
+        design = func if not bind else _Bound(func, bind)
+        modules = tuple(dict.fromkeys(m.__module__ for m in (func, batch) if m is not None))
+        return cls(
+            name=name,
+            design=design,
+            label=label or name,
+            summary=summary or (doc.splitlines()[0] if doc else ""),
+            hyperparameters=hyper,
+            batch=batch,
+            batch_size=batch_size,
+            produces=tuple(produces),
+            path_param=path_param,
+            modules=modules,
+        )
+
+    def check_params(self, params: dict, where: str = "params") -> None:
+        """Raise ValueError naming the key for an unknown or mistyped hyperparameter."""
+        accepted = self.hyperparameters
+        for key, value in params.items():
+            if key not in accepted:
+                known = ", ".join(accepted) or "none"
+                raise ValueError(f"{where}.{key}: unknown hyperparameter for method {self.name!r} (accepts: {known})")
+            accepted[key].check(value, f"{where}.{key}")
+
+    def _stamp(self, result, params: dict) -> list[Design]:
+        designs = list(result) if isinstance(result, (list, tuple)) else [result]
+        for d in designs:
+            if not isinstance(d, Design):
+                raise TypeError(f"method {self.name!r} returned {type(d).__name__}, not a Design (or a list of them)")
+        # A design that names no params (e.g. from codesign.score) gets the run's.
+        return [replace(d, method=self.name, params=d.params or dict(params)) for d in designs]
+
+    def __call__(self, instance, **params) -> list[Design]:
+        """Designs for one instance (always a list), with the name stamped in."""
+        self.check_params(params)
+        return self._stamp(self.design(instance, **params), params)
+
+    def run_batch(self, pairs) -> list[list[Design]]:
+        """Designs for many (instance, params) pairs: one batched call if the method has one."""
+        pairs = list(pairs)
+        if self.batch is None:
+            return [self(instance, **params) for instance, params in pairs]
+        for _, params in pairs:
+            self.check_params(params)
+        results = self.batch(pairs)
+        if len(results) != len(pairs):
+            raise RuntimeError(f"{self.name}: batch returned {len(results)} results for {len(pairs)} runs")
+        return [self._stamp(r, params) for r, (_, params) in zip(results, pairs)]
+
+
+class _Bound:
+    """``func`` with some keywords fixed; picklable, unlike a closure."""
+
+    def __init__(self, func, bound):
+        self.func, self.bound = func, bound
+        self.__module__ = func.__module__
+
+    def __call__(self, instance, **params):
+        return self.func(instance, **params, **self.bound)
+
+
+def _hyperparameters(func: Callable, name: str, dropped: set) -> dict:
+    try:
+        sig = inspect.signature(func)
+    except (TypeError, ValueError):
+        raise TypeError(f"method {name!r}: {func!r} is not a function with a signature") from None
+    params = list(sig.parameters.values())
+    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    if len(positional) != 1 or positional[0].default is not inspect.Parameter.empty:
+        raise TypeError(
+            f"method {name!r}: the function must take exactly one positional argument, the instance, "
+            f"then keyword-only hyperparameters (def f(instance, *, ...)); got {name}{sig}"
+        )
+    try:
+        hints = typing.get_type_hints(func)
+    except Exception:  # an annotation that does not resolve is treated as unchecked
+        hints = {}
+    docs = _param_docs(inspect.getdoc(func) or "")
+    out = {}
+    for p in params:
+        if p.kind is not p.KEYWORD_ONLY or p.name in dropped:
+            continue
+        if p.default is inspect.Parameter.empty:
+            raise TypeError(f"method {name!r}: hyperparameter {p.name!r} needs a default value")
+        annotation = hints.get(p.name, Any)
+        if annotation is Any and p.default is not None:
+            annotation = _kind_of(p.default)
+        out[p.name] = Hyperparameter(p.name, p.default, annotation, docs.get(p.name, ""))
+    return out
+
+
+def _kind_of(default):
+    """The annotation implied by an unannotated default."""
+    if isinstance(default, bool):
+        return bool
+    if isinstance(default, int):
+        return int
+    if isinstance(default, float):
+        return float
+    if isinstance(default, str):
+        return str
+    if isinstance(default, (list, tuple)):
+        return list
+    return Any
+
+
+def _fits(value, hint) -> bool:
+    if hint is Any or hint is inspect.Parameter.empty:
+        return True
+    origin = typing.get_origin(hint)
+    if origin in (typing.Union, types.UnionType):
+        return any(_fits(value, arg) for arg in typing.get_args(hint))
+    if hint is None or hint is type(None):
+        return value is None
+    if origin is typing.Literal:
+        return value in typing.get_args(hint)
+    if hint is bool:
+        return isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if hint is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if origin in (list, tuple) or hint in (list, tuple):
+        if not isinstance(value, (list, tuple)):
+            return False
+        args = typing.get_args(hint)
+        return not args or all(_fits(v, args[0]) for v in value)
+    if origin is dict or hint is dict:
+        return isinstance(value, dict)
+    if isinstance(hint, type):
+        return isinstance(value, hint)
+    return True
+
+
+def _type_name(hint) -> str:
+    if hint is Any or hint is inspect.Parameter.empty:
+        return "any"
+    if hint is None or hint is type(None):
+        return "None"
+    origin = typing.get_origin(hint)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_type_name(a) for a in typing.get_args(hint))
+    if origin is typing.Literal:
+        return " or ".join(repr(a) for a in typing.get_args(hint))
+    if origin in (list, tuple):
+        args = typing.get_args(hint)
+        return f"list of {_type_name(args[0])}" if args else "list"
+    return getattr(hint, "__name__", str(hint))
+
+
+def _param_docs(doc: str) -> dict:
+    """First sentence of each parameter's description in a numpydoc ``Parameters`` section."""
+    out, lines = {}, doc.splitlines()
+    try:
+        start = next(i for i, line in enumerate(lines) if line.strip() == "Parameters") + 2
+    except StopIteration:
+        return out
+    names, text = [], []
+
+    def flush():
+        sentence = " ".join(text).split(". ")[0].strip().rstrip(".")
+        for n in names:
+            out.setdefault(n, sentence)
+
+    for line in lines[start:]:
+        if line.strip() in ("Returns", "Raises", "Notes", "Examples", "See Also") or line.startswith("---"):
+            break
+        if line and not line.startswith(" "):
+            flush()
+            names = [n.strip() for n in line.split(":")[0].split(",")]
+            text = []
+        elif line.strip():
+            text.append(line.strip())
+    flush()
+    return out
+
+
+_REGISTRY: dict[str, Method] = {}
+
+
+def register(m: Method, *, replace_existing: bool = False) -> Method:
+    """Register a :class:`Method` under its name; a second method of the same name is an error."""
+    old = _REGISTRY.get(m.name)
+    if old is not None and not replace_existing and old.modules != m.modules:
+        raise ValueError(f"method {m.name!r} is already registered (from {', '.join(old.modules)})")
+    _REGISTRY[m.name] = m
+    return m
+
+
+def method(
+    name: str | None = None,
+    *,
+    label: str | None = None,
+    summary: str | None = None,
+    bind: dict | None = None,
+    exclude: tuple = (),
+    batch: Callable | None = None,
+    batch_size: int = 64,
+    produces: tuple = (),
+    path_param: str | None = None,
+):
+    """Decorator: register ``f(instance, *, ...)`` as a design method and return it unchanged.
+
+    Parameters
+    ----------
+    name : str, optional
+        Name in specs and on the CLI (default: the function's name).
+    label : str, optional
+        Legend label (default: the name).
+    summary : str, optional
+        One line for ``compare methods`` (default: the docstring's first line).
+    bind, exclude
+        Keywords fixed to a value (``bind``) or hidden (``exclude``); neither is a
+        hyperparameter. Lets one function serve several methods.
+    batch, batch_size, produces, path_param
+        See :class:`Method`.
+    """
+
+    def decorate(func):
+        register(Method.from_function(func, name=name, label=label, summary=summary, bind=bind, exclude=exclude,
+                                      batch=batch, batch_size=batch_size, produces=produces,
+                                      path_param=path_param))
+        return func
+
+    return decorate
+
+
+def get_method(name: str) -> Method:
+    """The registered method called ``name``."""
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise UnknownMethodError(
+            f"unknown method {name!r}; registered methods: {', '.join(sorted(_REGISTRY))} "
+            "(or 'module:function' / 'file.py:function' for your own)"
+        ) from None
+
+
+def registered_methods() -> dict[str, Method]:
+    """Every registered method by name."""
+    return dict(_REGISTRY)

@@ -1,0 +1,124 @@
+"""Scoring: from a controller to a scored :class:`Design`, and the harness's common evaluation.
+
+Methods design, the evaluation scores (benchopt's split): :func:`score` turns any
+controller into a ``Design`` (exact cost where a closed form exists, else the
+validation-set estimate), and :func:`evaluate` is what the comparison harness
+applies to every design a method returns, so that every simulated cost on an
+instance comes from the same validation set of the size the experiment asks for.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .design import INFO_MODELS, Design, count_links
+from .evaluation import VALIDATION_SIZE, exact_cost, simulate, validation_set
+
+__all__ = ["score", "evaluate"]
+
+
+def _support(controller):
+    support = getattr(controller, "support", None)
+    if support is None:
+        support = getattr(controller, "K", None)
+    return None if support is None else np.asarray(support)
+
+
+def score(
+    instance,
+    controller,
+    *,
+    info_model: str | None = None,
+    links: int | None = None,
+    self_loops: int | None = None,
+    validation_size: int = VALIDATION_SIZE,
+    params: dict | None = None,
+    message: str = "",
+    seconds: float = 0.0,
+    extras: dict | None = None,
+) -> Design:
+    """A scored :class:`Design` for ``controller`` on ``instance``.
+
+    Parameters
+    ----------
+    instance : Instance
+    controller : object
+        A :class:`~codesign.controllers.StaticGain`, a linear dynamic controller
+        with ``closed_loop_responses(instance)``, or any object with the
+        controller protocol (``reset``/``step``; see :mod:`codesign.controllers`).
+    info_model : str, optional
+        One of :data:`~codesign.design.INFO_MODELS`; by default the controller's
+        ``info_model`` attribute if it has one, else ``"instantaneous"`` when it
+        uses links and ``"none"`` when it does not.
+    links, self_loops : int, optional
+        Directed off-diagonal links and self-loops; by default counted from the
+        controller's ``support`` (or its gain ``K``). Required when it has neither.
+    validation_size : int
+        Draws of the instance's validation set for a controller with no closed-form cost.
+    params, message, seconds, extras
+        Stored with the design; the harness fills ``params`` with the run's
+        hyperparameters when left empty, and stamps the method's name.
+
+    Returns
+    -------
+    Design
+        Exact cost (``cost_kind="exact"``) for linear controllers, else the
+        validation-set mean with its standard error (``"simulated"``); status
+        ``"diverged"`` when the rollout is unbounded.
+    """
+    support = _support(controller)
+    if support is not None:
+        counted = count_links(support)
+        links = counted[0] if links is None else links
+        self_loops = counted[1] if self_loops is None else self_loops
+    if links is None:
+        raise ValueError(f"{type(controller).__name__} has no support or K: pass links= (and self_loops=)")
+    self_loops = 0 if self_loops is None else self_loops
+    info_model = info_model or getattr(controller, "info_model", None) or ("instantaneous" if links else "none")
+    if info_model not in INFO_MODELS:
+        raise ValueError(f"info_model must be one of {INFO_MODELS}, got {info_model!r}")
+    design = Design(method="", params=dict(params or {}), controller=controller, cost=1.0, links=int(links),
+                    self_loops=int(self_loops), info_model=info_model, message=message, seconds=seconds,
+                    extras=dict(extras or {}))
+    exact = exact_cost(instance, controller)
+    if exact is not None:
+        if not np.isfinite(exact):
+            return replace(design, status="diverged", cost=float("nan"), cost_stderr=float("nan"),
+                           message=message or "the exact cost is not finite")
+        return replace(design, cost=exact, cost_stderr=0.0, cost_kind="exact")
+    return evaluate(instance, replace(design, cost_kind="simulated"), validation_size=validation_size)
+
+
+def evaluate(instance, design: Design, *, validation_size: int = VALIDATION_SIZE, noise_std: float = 0.0) -> Design:
+    """Score a method's design the way the harness does.
+
+    A simulated cost is recomputed on the instance's first ``validation_size``
+    validation draws (the same draws for every method), and the design becomes
+    ``diverged`` if that rollout is unbounded; exact costs are kept. With
+    ``noise_std > 0`` the design also gets a process-noise robustness score in its
+    extras (``noise_cost``, ``noise_cost_stderr``): exact for linear controllers,
+    simulated otherwise.
+    """
+    if design.controller is None or design.status not in ("optimal", "inaccurate"):
+        return design
+    if design.cost_kind == "simulated":
+        rollout = simulate(instance, design.controller, validation_set(instance, validation_size))
+        extras = dict(design.extras, validation_size=validation_size)
+        if not rollout.bounded or not np.isfinite(rollout.cost):
+            return Design.failure(design.method, design.params, "diverged",
+                                  f"the controller's {validation_size}-draw validation rollout is unbounded",
+                                  info_model=design.info_model, seconds=design.seconds, links=design.links,
+                                  self_loops=design.self_loops, extras=extras)
+        design = replace(design, cost=rollout.cost, cost_stderr=rollout.stderr, extras=extras)
+    if noise_std > 0:
+        cost = exact_cost(instance, design.controller, noise_std=noise_std)
+        stderr = 0.0
+        if cost is None:
+            rollout = simulate(instance, design.controller, validation_set(instance, validation_size),
+                               noise_std=noise_std, seed=instance.seed)
+            cost, stderr = rollout.cost, rollout.stderr
+        design = replace(design, extras=dict(design.extras, noise_std=noise_std, noise_cost=cost,
+                                             noise_cost_stderr=stderr))
+    return design

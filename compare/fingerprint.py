@@ -19,7 +19,7 @@ import types
 from importlib import import_module, metadata
 from pathlib import Path
 
-__all__ = ["fingerprint", "fingerprint_details", "EVALUATION_MODULES", "NUMERIC_PACKAGES"]
+__all__ = ["fingerprint", "fingerprint_details", "package_versions", "EVALUATION_MODULES", "NUMERIC_PACKAGES"]
 
 #: Modules every cost depends on, whatever the method.
 EVALUATION_MODULES = ("codesign.instances", "codesign.design", "codesign.controllers", "codesign.evaluation",
@@ -80,9 +80,10 @@ def _source_hash(module: types.ModuleType) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def _versions() -> dict:
+def package_versions(names=NUMERIC_PACKAGES) -> dict[str, str]:
+    """Installed version of each package (``"not installed"`` if missing), without importing it."""
     out = {}
-    for name in NUMERIC_PACKAGES:
+    for name in names:
         try:
             out[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
@@ -99,7 +100,7 @@ def fingerprint_details(modules) -> dict:
     if key not in _CACHE:
         closure = _closure(list(EVALUATION_MODULES) + list(modules))
         sources = {m.__name__: _source_hash(m) for m in closure}
-        versions = _versions()
+        versions = package_versions()
         text = json.dumps({"modules": sources, "versions": versions}, sort_keys=True)
         _CACHE[key] = {"fingerprint": hashlib.sha256(text.encode()).hexdigest()[:16], "modules": sources,
                        "versions": versions}

@@ -11,7 +11,6 @@ import json
 import platform
 from collections import Counter, defaultdict
 from dataclasses import dataclass
-from importlib import metadata
 from pathlib import Path
 
 import matplotlib
@@ -285,13 +284,9 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
 
 
 def software_versions() -> dict[str, str]:
-    versions = {"python": platform.python_version()}
-    for name in _PACKAGES:
-        try:
-            versions[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            versions[name] = "not installed"
-    return versions
+    from .fingerprint import package_versions
+
+    return {"python": platform.python_version(), **package_versions(_PACKAGES)}
 
 
 def _fmt(value: float, digits: int = 4) -> str:

@@ -103,3 +103,31 @@ def test_params_column_rounds_grid_values_and_keeps_the_rest():
     text = _params_text('{"gamma": 0.0021544346900318843, "reweight": 3, "rho": 100.0, "end": Infinity, "g": "plant"}')
     assert text == "end=inf, g=plant, gamma=0.002154, reweight=3, rho=100"
     assert _params_text("{}") == "—"
+
+
+def test_sections_come_from_declarations_not_names(tmp_path):
+    """Table 1 appears for any experiment that asks for it, whatever its name; not otherwise."""
+    from compare import Store, parse_spec, run_experiment
+    from compare.cli import _write_report
+
+    spec = """
+name = "{name}"
+{report}
+[instances]
+n = [8]
+a_norms = [0.995, 1.05]
+seeds = 2
+degree = 4
+horizon = 10
+[[methods]]
+method = "lqr"
+[[methods]]
+method = "autonomous"
+"""
+    for name, report, expected in (("renamed-table", '[report]\nsections = ["table1"]', True),
+                                   ("table1-lookalike", "", False)):
+        out = tmp_path / name
+        with Store(out / "results.sqlite") as store:
+            run_experiment(parse_spec(spec.format(name=name, report=report)), store, progress=False)
+            _write_report(store, out)
+        assert ("## Table 1" in (out / "report.md").read_text()) is expected

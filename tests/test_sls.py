@@ -282,7 +282,7 @@ def test_qi_on_unreachable_pair(small):
 def test_registered(inst):
     for name in ("sls", "sls_topologies"):
         method = get_method(name)
-        assert method.func in (baselines.sls, baselines.sls_topologies)
+        assert method.design in (baselines.sls, baselines.sls_topologies)
     get_method("sls").check_params({"graph": "plant^2", "speed": 3, "act_delay": 1, "fir": 20})
     with pytest.raises(ValueError):
         get_method("sls").check_params({"grpah": "plant"})

@@ -254,6 +254,35 @@ def _knn_graph(positions: np.ndarray, degree: int) -> np.ndarray:
     return adj
 
 
+def canonical_eigh(M: np.ndarray, *, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues (ascending) and an orthonormal eigenbasis of symmetric ``M`` that do not depend on LAPACK.
+
+    Inside an eigenspace of a repeated eigenvalue any orthonormal basis is an
+    eigenbasis, and LAPACK builds for different CPUs return different ones. The kNN
+    graphs of the paper's family always have a repeated eigenvalue (nodes with the
+    same neighbourhood give a null space of dimension 5-11 at N = 20), so
+    ``V diag(a) V'`` would depend on the machine. Within each cluster of eigenvalues
+    closer than ``tol`` (relative to the largest), the basis is rotated to the
+    eigenvectors of the fixed generic diagonal form ``V_k' D V_k``
+    (``D = diag(sqrt(i + 1/2))``), which the eigenspace alone determines (up to signs,
+    which ``V diag(a) V'`` does not see).
+    """
+    w, V = np.linalg.eigh(M)
+    scale = max(float(np.abs(w).max()), 1e-300)
+    D = np.sqrt(np.arange(M.shape[0]) + 0.5)
+    start = 0
+    for stop in range(1, w.size + 1):
+        if stop < w.size and w[stop] - w[stop - 1] <= tol * scale:
+            continue
+        if stop - start > 1:
+            block = V[:, start:stop]
+            _, W = np.linalg.eigh((block.T * D) @ block)
+            V[:, start:stop] = block @ W
+            w[start:stop] = w[start:stop].mean()
+        start = stop
+    return w, V
+
+
 def paper_instance(
     seed: int,
     *,
@@ -270,7 +299,9 @@ def paper_instance(
     (itself included), made symmetric; redrawn until connected. ``A`` and ``B``
     share the eigenvectors of the normalized adjacency with i.i.d. N(0, 1)
     eigenvalues, are cut to ``hops`` hops and scaled to spectral norms ``a_norm``
-    and ``b_norm``. ``Q = R = I`` and ``P`` solves the DARE.
+    and ``b_norm``. ``Q = R = I`` and ``P`` solves the DARE. The eigenvectors are
+    taken in a machine-independent basis (:func:`canonical_eigh`), so a seed gives
+    the same instance on every machine.
 
     Parameters
     ----------
@@ -295,7 +326,7 @@ def paper_instance(
         if nx.is_connected(nx.from_numpy_array(comm)):
             break
     gso = comm / np.linalg.norm(comm, 2)
-    _, V = np.linalg.eigh(gso)
+    _, V = canonical_eigh(gso)
     a = rng.standard_normal(n)
     b = rng.standard_normal(n)
     far = hop_distances(comm) > hops

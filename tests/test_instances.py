@@ -106,3 +106,30 @@ def test_paper_instance_rejects_bad_arguments(kwargs, match):
 def test_paper_instance_rejects_negative_seed():
     with pytest.raises(InstanceError, match="seed"):
         paper_instance(-1)
+
+
+@pytest.mark.parametrize("seed", [0, 3, 7])
+def test_paper_instances_do_not_depend_on_the_lapack_basis(monkeypatch, seed):
+    """Another LAPACK returns another basis of each repeated eigenvalue's eigenspace: same instance."""
+    import codesign.instances as instances
+
+    reference = paper_instance(seed, a_norm=1.05)
+    original = np.linalg.eigh
+    rng = np.random.default_rng(seed)
+
+    def rotated_eigh(M):
+        w, V = original(M)
+        if M.shape[0] == reference.n:
+            for value in np.unique(np.round(w, 9)):
+                idx = np.where(np.abs(w - value) < 1e-9)[0]
+                if idx.size > 1:
+                    Q, _ = np.linalg.qr(rng.standard_normal((idx.size, idx.size)))
+                    V[:, idx] = V[:, idx] @ Q
+        return w, V
+
+    monkeypatch.setattr(instances.np.linalg, "eigh", rotated_eigh)
+    other = instances.paper_instance(seed, a_norm=1.05)
+    monkeypatch.undo()
+    np.testing.assert_allclose(other.A, reference.A, atol=1e-12)
+    np.testing.assert_allclose(other.B, reference.B, atol=1e-12)
+    assert np.array_equal(other.plant_adj, reference.plant_adj)

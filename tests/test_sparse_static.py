@@ -126,41 +126,25 @@ def _check_admm_front_against_truncation(instance, admm_designs):
 
 
 #: Known exceptions to "the ADMM front matches or beats truncation" on the paper
-#: family, seeds 0-29 at both a_norms (60 instances): (a_norm, seed) -> what happens.
-#: Both are heuristics for a combinatorial problem, and each misses somewhere.
-#: Reweighted l1 (the default, reweight=3) misses once: at 11 links it keeps LQR's
-#: 12th-largest off-diagonal entry (|K_ij| = 0.16458) where truncation keeps the 10th
-#: (0.16532, 0.45 % larger) and polishes to 1.140778 against 1.140272 (+4.4e-4). The
-#: same pattern comes out with 5 rounds, eps 1e-4 or 1e-2, rho = 10, a 19-point grid,
-#: tolerances tightened to convergence, and a restart from LQR at every gamma.
+#: family, seeds 0-29 at both a_norms (60 instances, machine-independent since the
+#: instance generator fixes its eigenbasis): (a_norm, seed) -> what happens. Both are
+#: heuristics for a combinatorial problem, and each misses somewhere. Reweighted l1
+#: (the default, reweight=3) misses once: at 1 link it keeps another entry than
+#: truncation and polishes to 1.141853 against 1.133221 (+7.6e-3).
 ADMM_LOSES_TO_TRUNCATION = {
-    (1.05, 0): "reweighted l1 keeps LQR's 12th-largest entry where truncation keeps the 10th: +4.4e-4",
+    (1.05, 21): "reweighted l1's 1-link point is 7.6e-3 above truncation's (1.141853 against 1.133221)",
 }
-#: Plain l1 (reweight=1) misses three times, by more (and a fourth time where the
-#: instance differs, see ROUNDING_DEPENDENT).
+#: Plain l1 (reweight=1) misses twice: the same 1-link point, and by a hair at 50 links.
 PLAIN_L1_LOSES_TO_TRUNCATION = {
-    (1.05, 0): "on the other eigenbasis of seed 0's instance, plain l1's 7-link point is 1.2e-3 above truncation's",
-    (0.995, 10): "plain l1's 6-link point is 1.6e-3 above truncation's",
-    (0.995, 20): "plain l1's 2-link point is 8.9e-3 above truncation's",
-    (1.05, 21): "plain l1's 3-link point is 5.0e-4 above truncation's",
+    (1.05, 21): "plain l1's 1-link point is 7.6e-3 above truncation's (1.141853 against 1.133221)",
+    (0.995, 26): "plain l1's 50-link point is 1.2e-4 above truncation's (1.0075255 against 1.0074084)",
 }
-
-
-#: Instances whose matrices depend on the machine: the paper's generator takes A and B
-#: from eigenvectors of the graph, and seed 0's graph has a repeated eigenvalue, inside
-#: whose eigenspace LAPACK returns a machine-dependent basis. Measured on two 2-core
-#: machines: on one, reweighted l1 loses at 11 links and plain l1 matches; on the other
-#: (AMD EPYC, scipy-openblas 0.3.31), reweighted l1 matches and plain l1 loses at 7
-#: links (1.17245 against 1.17108). Neither can be a strict xfail.
-ROUNDING_DEPENDENT = {(1.05, 0)}
 
 
 def _expect_known_loss(request, instance, known_losses=ADMM_LOSES_TO_TRUNCATION):
-    key = (instance.spec["a_norm"], instance.spec["seed"])
-    known = known_losses.get(key)
+    known = known_losses.get((instance.spec["a_norm"], instance.spec["seed"]))
     if known:
-        strict = key not in ROUNDING_DEPENDENT
-        request.applymarker(pytest.mark.xfail(strict=strict, raises=AssertionError, reason=known))
+        request.applymarker(pytest.mark.xfail(strict=True, raises=AssertionError, reason=known))
 
 
 def test_admm_matches_or_beats_truncated_lqr(instance, paths, request):

@@ -41,7 +41,8 @@ def _write_report(store, out: Path) -> dict:
     commands.append(f"compare report --out {out}")
     title = "Comparison report: " + ", ".join(sorted(specs)) if specs else "Comparison report"
     return write_report(store.records(), out, specs=specs, title=title, commands=commands,
-                        load_controller=store.controller, meta=meta, members=store.members())
+                        load_controller=store.controller, meta=meta, members=store.members(),
+                        superseded=store.superseded())
 
 
 _PLUGIN_HELP = ("Import a module (by name) or a .py file that registers methods with "

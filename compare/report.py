@@ -464,7 +464,7 @@ def _learning_sections(records: list[dict], out: Path, files: dict, load_control
 
 def write_report(records: list[dict], out, *, specs: dict | None = None, title: str = "Comparison report",
                  commands: list[str] | None = None, load_controller=None, meta: dict | None = None,
-                 members: dict | None = None) -> dict[str, Path]:
+                 members: dict | None = None, superseded: int = 0) -> dict[str, Path]:
     """Write ``cost_vs_links.png/.svg``, ``runs.csv`` and ``report.md`` into ``out``.
 
     Parameters
@@ -488,6 +488,8 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         come from these declarations only.
     members : dict, optional
         :meth:`Store.members`: experiment name -> its run keys.
+    superseded : int
+        Stored runs of code that has changed since (not in ``records``), said in the report.
 
     Returns
     -------
@@ -521,7 +523,9 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         f"{len(runs)} runs on {len(instances)} instances, {len(records)} designs. "
         "Costs are E[J] / trace(P) over the horizon (centralized LQR = 1); links are directed off-diagonal "
         "communication links (self-loops are local feedback and listed separately). "
-        "Exact closed-form costs for linear controllers, validation-set estimates for learned ones.",
+        "Exact closed-form costs for linear controllers, validation-set estimates for learned ones."
+        + (f" The store also holds {superseded} runs made by code that has changed since; they are not "
+           "shown (see Code fingerprints)." if superseded else ""),
         "",
         "![cost versus links](cost_vs_links.png)",
         "",

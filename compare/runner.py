@@ -245,7 +245,7 @@ def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store) -> None:
     """Store what the report needs beside the runs: the spec, methods, fingerprints and instance facts."""
     store.set_meta(f"spec:{spec.name}", spec.source)
     store.set_meta(f"sections:{spec.name}", list(spec.sections))
-    store.add_members(spec.name, [run.key for run in runs])
+    store.set_members(spec.name, [run.key for run in runs])
     for name in dict.fromkeys(run.method for run in runs):
         m = get_method(name)
         details = fingerprint_details(m.modules)

@@ -138,9 +138,14 @@ class Store:
         with self._conn:
             self._conn.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value, sort_keys=True)))
 
-    def add_members(self, experiment: str, keys) -> None:
-        """Record which runs make up an experiment (a run may belong to several)."""
+    def set_members(self, experiment: str, keys) -> None:
+        """Record which runs make up an experiment now (a run may belong to several).
+
+        Runs an experiment no longer names (their code changed, so their keys did) stay
+        stored, and are reused if the code comes back, but are no longer reported.
+        """
         with self._conn:
+            self._conn.execute("DELETE FROM members WHERE experiment = ?", (experiment,))
             self._conn.executemany("INSERT OR IGNORE INTO members VALUES (?, ?)", [(experiment, k) for k in keys])
 
     def claim(self, keys, owner: str) -> list[str]:
@@ -239,13 +244,24 @@ class Store:
     def __len__(self) -> int:
         return self._conn.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
 
+    def superseded(self) -> int:
+        """Stored runs that no experiment names any more (made by code that has changed since)."""
+        return self._conn.execute(
+            "SELECT COUNT(*) FROM runs WHERE EXISTS (SELECT 1 FROM members) "
+            "AND run_key NOT IN (SELECT run_key FROM members)").fetchone()[0]
+
     def records(self) -> list[dict]:
-        """Every stored design as a flat dict (JSON fields decoded, no controller)."""
+        """Every current design as a flat dict (JSON fields decoded, no controller).
+
+        Current means named by an experiment's latest ``compare run`` (see
+        :meth:`set_members`); a store without membership records gives every design.
+        """
         query = """
             SELECT d.run_key, d.idx, r.experiment, r.instance, d.method, d.label, d.params, d.cost,
                    d.cost_stderr, d.cost_kind, d.links, d.self_loops, d.info_model, d.status, d.message,
                    d.seconds, d.controller_kind, d.extras, r.version
             FROM designs d JOIN runs r USING (run_key)
+            WHERE NOT EXISTS (SELECT 1 FROM members) OR d.run_key IN (SELECT run_key FROM members)
             ORDER BY r.instance, d.label, d.run_key, d.idx
         """
         cols = [

@@ -100,7 +100,10 @@ def test_plain_function_from_a_spec_runs_reruns_nothing_and_edits_rerun_only_it(
     edited = _cli("run", spec, "--out", out, "--workers", "1", "--no-progress")[1]
     assert "12 runs: 8 computed, 4 already stored" in edited
     rows = list(csv.DictReader((out / "runs.csv").open()))
-    assert len({r["fingerprint"] for r in rows if r["method"] == "my_methods:trunc10"}) == 2
+    assert len(rows) == 12 and len({r["fingerprint"] for r in rows if r["method"] == "my_methods:trunc10"}) == 1
+    assert "also holds 8 runs made by code that has changed since" in (out / "report.md").read_text()
+    with Store(out / "results.sqlite") as store:
+        assert len(store) == 20 and store.superseded() == 8
 
 
 def test_user_method_in_worker_processes(tmp_path):

@@ -230,9 +230,9 @@ def sparse_admm(
     Both ℓ1 variants are heuristics for a combinatorial choice of pattern. On the
     paper's family (seeds 0-29 at ‖A‖ = 0.995 and 1.05, default grid) the front of
     the default ``reweight=3`` matches or beats truncated LQR (:func:`baselines.truncated_lqr`,
-    within 1e-4) at every link count on 59 of 60 instances; the miss is the 1-link
-    point of one instance, 7.6e-3 in cost. Plain ℓ1 (``reweight=1``) misses on 2 of
-    60: the same point, and one 50-link point by 1.2e-4.
+    within 1e-4) at every link count on 57 of 60 instances; the three misses are
+    single points, by 1.5e-4 to 5.7e-3 in cost. Plain ℓ1 (``reweight=1``) also misses
+    on 3 of 60 (other instances), by 1.4e-4 to 3.7e-3.
     """
     n = instance.n
     gammas = check_gammas(ADMM_GAMMAS if gammas is None else gammas)

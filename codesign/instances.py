@@ -18,6 +18,7 @@ from typing import Any
 import networkx as nx
 import numpy as np
 import scipy.linalg
+import scipy.stats
 
 __all__ = ["Instance", "InstanceError", "paper_instance", "hop_distances"]
 
@@ -254,18 +255,22 @@ def _knn_graph(positions: np.ndarray, degree: int) -> np.ndarray:
     return adj
 
 
-def canonical_eigh(M: np.ndarray, *, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+def canonical_eigh(M: np.ndarray, *, rng: np.random.Generator | None = None,
+                   tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues (ascending) and an orthonormal eigenbasis of symmetric ``M`` that do not depend on LAPACK.
 
-    Inside an eigenspace of a repeated eigenvalue any orthonormal basis is an
+    Inside the eigenspace of a repeated eigenvalue any orthonormal basis is an
     eigenbasis, and LAPACK builds for different CPUs return different ones. The kNN
     graphs of the paper's family always have a repeated eigenvalue (nodes with the
     same neighbourhood give a null space of dimension 5-11 at N = 20), so
     ``V diag(a) V'`` would depend on the machine. Within each cluster of eigenvalues
-    closer than ``tol`` (relative to the largest), the basis is rotated to the
-    eigenvectors of the fixed generic diagonal form ``V_k' D V_k``
-    (``D = diag(sqrt(i + 1/2))``), which the eigenspace alone determines (up to signs,
-    which ``V diag(a) V'`` does not see).
+    closer than ``tol`` (relative to the largest), the basis is first made canonical:
+    the eigenvectors of the generic diagonal form ``V_k' D V_k`` with
+    ``D = diag(sqrt(i + 1/2))``, which the eigenspace alone determines, each signed
+    so that its largest entry (lowest index among ties) is positive. With ``rng``,
+    that basis is then rotated by a Haar-random orthogonal matrix
+    (:data:`scipy.stats.ortho_group`), so that the basis of a degenerate eigenspace
+    is uniformly distributed, as no choice of basis is privileged.
     """
     w, V = np.linalg.eigh(M)
     scale = max(float(np.abs(w).max()), 1e-300)
@@ -277,10 +282,20 @@ def canonical_eigh(M: np.ndarray, *, tol: float = 1e-9) -> tuple[np.ndarray, np.
         if stop - start > 1:
             block = V[:, start:stop]
             _, W = np.linalg.eigh((block.T * D) @ block)
-            V[:, start:stop] = block @ W
+            block = block @ W
+            magnitude = np.abs(block)
+            lead = np.argmax(magnitude >= magnitude.max(axis=0) - 1e-9, axis=0)
+            block = block * np.sign(block[lead, np.arange(block.shape[1])])
+            if rng is not None:
+                block = block @ scipy.stats.ortho_group.rvs(stop - start, random_state=rng)
+            V[:, start:stop] = block
             w[start:stop] = w[start:stop].mean()
         start = stop
     return w, V
+
+
+#: Salt of the stream that rotates degenerate eigenspaces, apart from the instance's own stream.
+_BASIS_SALT = 0xBA515
 
 
 def paper_instance(
@@ -299,9 +314,10 @@ def paper_instance(
     (itself included), made symmetric; redrawn until connected. ``A`` and ``B``
     share the eigenvectors of the normalized adjacency with i.i.d. N(0, 1)
     eigenvalues, are cut to ``hops`` hops and scaled to spectral norms ``a_norm``
-    and ``b_norm``. ``Q = R = I`` and ``P`` solves the DARE. The eigenvectors are
-    taken in a machine-independent basis (:func:`canonical_eigh`), so a seed gives
-    the same instance on every machine.
+    and ``b_norm``. ``Q = R = I`` and ``P`` solves the DARE. Where the adjacency
+    has a repeated eigenvalue (always, at the paper's sizes), the eigenvectors of its
+    eigenspace are a seeded uniformly random basis (:func:`canonical_eigh`), so a
+    seed gives the same instance on every machine.
 
     Parameters
     ----------
@@ -326,7 +342,7 @@ def paper_instance(
         if nx.is_connected(nx.from_numpy_array(comm)):
             break
     gso = comm / np.linalg.norm(comm, 2)
-    _, V = canonical_eigh(gso)
+    _, V = canonical_eigh(gso, rng=np.random.default_rng([int(seed), _BASIS_SALT]))
     a = rng.standard_normal(n)
     b = rng.standard_normal(n)
     far = hop_distances(comm) > hops

@@ -9,7 +9,16 @@ Public names::
 """
 
 from .controllers import StaticGain, ZeroInput, controller_from_arrays, register_controller
-from .design import INFO_MODELS, STATUSES, Design, count_links
+from .design import (
+    INACCURATE_RTOL,
+    INFO_MODELS,
+    SOLVER_STATUS,
+    STATUSES,
+    Design,
+    count_links,
+    solver_status,
+    vet_solver_cost,
+)
 from .evaluation import (
     Rollout,
     compare_exact_and_simulated,
@@ -35,6 +44,10 @@ __all__ = [
     "hop_distances",
     "Design",
     "STATUSES",
+    "SOLVER_STATUS",
+    "INACCURATE_RTOL",
+    "solver_status",
+    "vet_solver_cost",
     "INFO_MODELS",
     "count_links",
     "StaticGain",

@@ -8,11 +8,79 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Design", "STATUSES", "INFO_MODELS", "count_links"]
+__all__ = [
+    "Design",
+    "STATUSES",
+    "INFO_MODELS",
+    "count_links",
+    "SOLVER_STATUS",
+    "solver_status",
+    "vet_solver_cost",
+    "INACCURATE_RTOL",
+]
 
 #: Every status a design can carry. Only ``optimal`` (and, flagged, ``inaccurate``)
 #: designs carry a cost; the others carry NaN and a message saying why.
 STATUSES = ("optimal", "inaccurate", "infeasible", "diverged", "failed")
+
+#: The one policy from a convex solver's status (cvxpy's names) to a design status;
+#: any other status (``user_limit``, ``solver_error``, ``unbounded``, ...) is ``failed``.
+SOLVER_STATUS = {
+    "optimal": "optimal",
+    "optimal_inaccurate": "inaccurate",
+    "infeasible": "infeasible",
+    "infeasible_inaccurate": "infeasible",
+}
+
+#: Relative gap allowed between an ``inaccurate`` solve's objective and the exact cost
+#: of its design. Clarabel reports ``optimal_inaccurate`` when it meets its reduced
+#: tolerances (5e-5 relative duality gap, 1e-4 feasibility) but not the full ones, so an
+#: honest inaccurate solution agrees to about 1e-4; 1e-3 leaves room for that and
+#: still rejects the solves that stop far away (objectives off by orders of magnitude,
+#: e.g. 1e29 on infeasible supports).
+INACCURATE_RTOL = 1e-3
+
+
+def solver_status(raw) -> str:
+    """Design status for a solver's status string (see :data:`SOLVER_STATUS`); unknown -> ``"failed"``."""
+    return SOLVER_STATUS.get(str(raw), "failed")
+
+
+def vet_solver_cost(status: str, objective: float, cost: float, *, rtol: float = INACCURATE_RTOL) -> tuple[str, str]:
+    """Keep a solve's status only when the exact cost of its design backs the solver's objective.
+
+    Parameters
+    ----------
+    status : str
+        The design status from :func:`solver_status`; only ``optimal`` and
+        ``inaccurate`` are checked, others are returned as they are.
+    objective : float
+        The solver's objective, in the same (normalized) units as ``cost``.
+    cost : float
+        The design's cost re-evaluated in closed form (from the realized
+        controller, not from the solver's variables).
+    rtol : float
+        Largest relative gap ``|cost - objective| / max(1, |cost|)`` (normalized
+        costs are >= 1). The default suits ``inaccurate`` solves; a method passes
+        its own, tighter one for ``optimal`` solves.
+
+    Returns
+    -------
+    (str, str)
+        ``(status, "")`` when the cost backs the objective, else ``("failed", why)``.
+    """
+    if status not in ("optimal", "inaccurate"):
+        return status, ""
+    if not np.isfinite(cost):
+        return "failed", f"the design's exact cost is {cost}"
+    if not np.isfinite(objective):
+        return "failed", f"the solver's objective is {objective}"
+    gap = abs(cost - objective) / max(1.0, abs(cost))
+    if gap > rtol:
+        return "failed", (f"the design's exact cost {cost:.6g} disagrees with the solver's objective "
+                          f"{objective:.6g} (relative gap {gap:.2e} > {rtol:g})")
+    return status, ""
+
 
 #: How information travels in a design: ``instantaneous`` (links deliver the current
 #: state with no delay, possibly over many hops), ``delayed`` (one step per hop, as

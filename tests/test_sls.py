@@ -1,5 +1,6 @@
 """SLS under delay constraints, its realization, the FIR variant and the QI check."""
 
+import functools
 import importlib
 
 import numpy as np
@@ -14,6 +15,7 @@ from baselines import (
     topology,
 )
 from codesign import (
+    SOLVER_STATUS,
     Instance,
     compare_exact_and_simulated,
     controller_from_arrays,
@@ -21,7 +23,9 @@ from codesign import (
     paper_instance,
     response_cost,
     simulate,
+    solver_status,
     static_gain_cost,
+    vet_solver_cost,
 )
 from compare.registry import get_method
 
@@ -244,6 +248,46 @@ def test_solver_trouble_is_a_status(inst, monkeypatch):
     monkeypatch.setattr(sls_module.cp.Problem, "solve", broken)
     design = sls(inst)
     assert design.status == "failed" and "boom" in design.message
+
+
+def test_one_status_policy():
+    assert SOLVER_STATUS == {"optimal": "optimal", "optimal_inaccurate": "inaccurate",
+                             "infeasible": "infeasible", "infeasible_inaccurate": "infeasible"}
+    assert solver_status("optimal_inaccurate") == "inaccurate"
+    assert [solver_status(raw) for raw in ("user_limit", "solver_error", "unbounded", None)] == ["failed"] * 4
+    assert vet_solver_cost("inaccurate", 1.5 * (1 + 1e-4), 1.5) == ("inaccurate", "")
+    status, why = vet_solver_cost("inaccurate", 1e29, 1.5)
+    assert status == "failed" and "disagrees" in why
+    assert vet_solver_cost("inaccurate", 1.5, float("inf"))[0] == "failed"
+    assert vet_solver_cost("optimal", 1.5 * (1 + 1e-4), 1.5, rtol=1e-5)[0] == "failed"
+    assert vet_solver_cost("infeasible", float("nan"), float("nan")) == ("infeasible", "")
+
+
+def test_inaccurate_solve_kept_only_when_the_realized_cost_agrees(small, monkeypatch):
+    exact = {label: sls(small, **kwargs) for label, kwargs in
+             (("finite", {}), ("short", {"horizon": 8}), ("fir", {"fir": 15}))}
+    solve = sls_module._solve_qp
+
+    def inaccurate(*args, raw="optimal_inaccurate", shift=0.0, **kwargs):
+        X, U, info = solve(*args, **kwargs)
+        return X, U, {**info, "solver_status": raw, "objective": info["objective"] * (1 + shift)}
+
+    monkeypatch.setattr(sls_module, "_solve_qp", inaccurate)
+    # "short" and "fir" are checked on the QP's own horizon, the others on the benchmark cost.
+    for label, kwargs in (("finite", {}), ("short", {"horizon": 8}), ("fir", {"fir": 15})):
+        design = sls(small, **kwargs)
+        assert design.status == "inaccurate" and "optimal_inaccurate" in design.message, label
+        assert design.cost == exact[label].cost and design.extras["realized_objective_gap"] < 1e-7
+    # Within codesign.INACCURATE_RTOL an inaccurate solve is kept; an optimal one is not.
+    monkeypatch.setattr(sls_module, "_solve_qp", functools.partial(inaccurate, shift=1e-4))
+    assert sls(small).status == "inaccurate"
+    monkeypatch.setattr(sls_module, "_solve_qp", functools.partial(inaccurate, raw="optimal", shift=1e-4))
+    assert sls(small).status == "failed"
+    monkeypatch.setattr(sls_module, "_solve_qp", functools.partial(inaccurate, shift=1e-2))
+    for kwargs in ({}, {"horizon": 8}, {"fir": 15}):
+        design = sls(small, **kwargs)
+        assert design.status == "failed" and np.isnan(design.cost)
+        assert "optimal_inaccurate" in design.message and "disagrees" in design.message
 
 
 def test_bad_inputs_raise(inst):

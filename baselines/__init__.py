@@ -4,7 +4,7 @@ Public names::
 
     from baselines import lqr, autonomous, decentralized, polish_gain
     from baselines import sls, sls_topologies, is_quadratically_invariant
-    from baselines import sparse_admm, sparse_sdp, truncated_lqr
+    from baselines import sparse_admm, sparse_sdp, truncated_lqr, sparse_delayed
     from baselines import gcnn, gcnn_batch, GCNNController
 """
 
@@ -14,6 +14,7 @@ from .polish import PolishResult, polish_gain
 from .qi import QIResult, is_quadratically_invariant
 from .sls import TOPOLOGY_FAMILY, SLSController, sls, sls_topologies, topology
 from .sparse_admm import ADMM_GAMMAS, sparse_admm
+from .sparse_delayed import DelayedStaticGain, sparse_delayed
 from .sparse_sdp import SDP_GAMMAS, SparseSDP, sparse_sdp
 from .truncation import truncated_lqr
 
@@ -31,6 +32,8 @@ __all__ = [
     "is_quadratically_invariant",
     "QIResult",
     "sparse_admm",
+    "sparse_delayed",
+    "DelayedStaticGain",
     "ADMM_GAMMAS",
     "sparse_sdp",
     "SparseSDP",

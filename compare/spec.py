@@ -52,7 +52,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 from .fingerprint import fingerprint
-from .plugins import Plugin, PluginError, load_plugins, parse_plugin
+from .plugins import PluginError, load_plugins, parse_plugin
 from .registry import UnknownMethodError, get_method
 
 __all__ = [

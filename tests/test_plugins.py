@@ -1,11 +1,11 @@
 """Bring your own method: plug-ins from specs and the CLI, fingerprints, concurrent runs."""
 
 import csv
+import os
 import subprocess
 import sys
 import textwrap
 import time
-from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -67,10 +67,9 @@ def _run(*args):
     return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
 
 
-def _cli(*args, cwd=None, env=None):
+def _cli(*args):
     """``compare`` in a fresh process, as a user runs it (a process sees the code as it was at import)."""
-    done = subprocess.run([sys.executable, "-m", "compare.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, env=env)
+    done = subprocess.run([sys.executable, "-m", "compare.cli", *map(str, args)], capture_output=True, text=True)
     return done.returncode, done.stdout + done.stderr
 
 
@@ -228,7 +227,7 @@ def test_two_runs_at_once_never_compute_a_run_twice(tmp_path):
     spec = _setup(tmp_path, spec=SPEC.replace("seeds = 2", "seeds = 3"), plugin=plugin)
     out = tmp_path / "out"
     count = tmp_path / "count.txt"
-    env = {**__import__("os").environ, "COUNT_FILE": str(count)}
+    env = {**os.environ, "COUNT_FILE": str(count)}
     command = [sys.executable, "-m", "compare.cli", "run", str(spec), "--out", str(out), "--workers", "1",
                "--no-progress"]
     first = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -243,8 +242,6 @@ def test_two_runs_at_once_never_compute_a_run_twice(tmp_path):
 
 
 def test_no_wait_stops_with_exit_2_when_another_process_holds_runs(tmp_path):
-    import os
-
     spec = _setup(tmp_path)
     out = tmp_path / "out"
     parsed = parse_spec(spec.read_text(), base=tmp_path)

@@ -1,4 +1,4 @@
-"""The GCNN baseline of Gama & Sojoudi (2021), as the paper benchmarked it (DESIGN.md Sec. 4).
+"""The GCNN baseline of Gama & Sojoudi (2021), as the paper benchmarked it (docs/methods.md).
 
 Memoryless: one graph-filter layer with K = 5 taps and 32 features, tanh, and a
 per-node linear readout, no bias:
@@ -369,6 +369,7 @@ def _finish(job: _GJob, results, seconds) -> Design:
         extras["max_state"] = float(long.max_state)
         extras["stability_steps"] = s["stability_steps"]
     rollout = simulate(job.instance, controller)
+    extras.update(rollout.summary())
     if not rollout.bounded:
         return Design.failure("gcnn", job.params, "diverged", "validation rollout unbounded",
                               info_model="instantaneous", seconds=seconds, links=links,
@@ -423,7 +424,8 @@ def gcnn(instance, *, seed: int = 0, steps: int = 750, batch: int = 20, lr: floa
     Returns
     -------
     Design
-        Simulated cost on the validation set; links are the given graph's
+        Simulated cost on the validation set (control-variate estimate; the
+        sample mean in ``extras["plain_cost"]``); links are the given graph's
         off-diagonal edges, ``info_model="instantaneous"``; ``extras`` holds the
         training curve, ``n_parameters``, the spectral radius of the closed loop
         linearized at the origin, and the boundedness of a long rollout.

@@ -2,7 +2,7 @@
 
 Closed-loop maps, 0-indexed as the evaluator uses them: ``x(t) = X[t] x(0)``,
 ``u(t) = U[t] x(0)`` with ``X[0] = I`` and ``X[t+1] = A X[t] + B U[t]``
-(DESIGN.md §5 writes ``Φx[k] = X[k-1]``, ``Φu[k] = U[k-1]``). The finite-horizon
+(the SLS papers write ``Φx[k] = X[k-1]``, ``Φu[k] = U[k-1]``). The finite-horizon
 problem is the convex QP
 
     min  sum_{t<T} ||Q^½ X[t]||² + ||R^½ U[t]||² + ||P^½ X[T]||²
@@ -34,7 +34,7 @@ import scipy.sparse as sp
 
 from codesign.controllers import register_controller
 from codesign.design import INACCURATE_RTOL, Design, count_links, solver_status, vet_solver_cost
-from codesign.evaluation import response_cost
+from codesign.evaluation import impulse_responses, response_cost
 from codesign.instances import hop_distances
 from codesign.methods import method
 
@@ -156,19 +156,7 @@ class SLSController:
         """
         if instance.n != self.n:
             raise ValueError(f"controller has n = {self.n}, instance has n = {instance.n}")
-        steps = instance.horizon if steps is None else int(steps)
-        n = self.n
-        phi_x = np.empty((steps + 1, n, n))
-        phi_u = np.empty((steps, n, n))
-        x = np.eye(n)  # row j: the trajectory from x(0) = e_j
-        state = self.reset(n)
-        phi_x[0] = x.T
-        for t in range(steps):
-            u, state = self.step(state, x)
-            x = x @ instance.A.T + u @ instance.B.T
-            phi_u[t] = u.T
-            phi_x[t + 1] = x.T
-        return phi_x, phi_u
+        return impulse_responses(instance, self, steps)
 
     def predicted_cost(self, instance, *, noise_std: float = 0.0) -> float:
         """Exact normalized E[J] of the closed loop, with process noise of ``noise_std``."""
@@ -270,7 +258,7 @@ def sls(
     horizon: int | None = None,
     fir: int | None = None,
 ) -> Design:
-    """SLS with communication-delay constraints on a graph (DESIGN.md §5).
+    """SLS with communication-delay constraints on a graph (docs/methods.md).
 
     Parameters
     ----------

@@ -5,9 +5,9 @@ For each weight γ on an increasing grid, minimize
     J(K) / trace(P) + γ Σ_{i≠j} w_ij |K_ij|,   J(K) = trace(P_K),   P_K = A_cl' P_K A_cl + Q + K'RK,
 
 over static gains (A_cl = A + BK here: this module uses the evaluator's sign,
-``u = K x``, where DESIGN.md §5 writes ``u = -Kx``; the ℓ1 term does not care and
+``u = K x``, where lqrsp writes ``u = -Kx``; the ℓ1 term does not care and
 the gradient below carries the sign). x(0) ~ N(0, I) plays the role of B₁B₁'.
-γ is in units of the normalized cost (DESIGN.md's γ is this γ times trace(P),
+γ is in units of the normalized cost (the lqrsp γ is this γ times trace(P),
 the LQR cost): one grid then suits every instance of the family, and a path's
 points line up across instances in a report.
 ADMM splits K = G:

@@ -65,7 +65,7 @@ import scipy.optimize
 
 from codesign.controllers import register_controller
 from codesign.design import Design, count_links
-from codesign.evaluation import exact_cost, spectral_radius
+from codesign.evaluation import exact_cost, impulse_responses, spectral_radius
 from codesign.methods import method
 
 from ._common import Timer
@@ -174,19 +174,7 @@ class DelayedStaticGain:
         """
         if instance.n != self.n:
             raise ValueError(f"controller has n = {self.n}, instance has n = {instance.n}")
-        steps = instance.horizon if steps is None else int(steps)
-        n = self.n
-        phi_x = np.empty((steps + 1, n, n))
-        phi_u = np.empty((steps, n, n))
-        x = np.eye(n)  # row j: the trajectory from x(0) = e_j
-        state = self.reset(n)
-        phi_x[0] = x.T
-        for t in range(steps):
-            u, state = self.step(state, x)
-            x = x @ instance.A.T + u @ instance.B.T
-            phi_u[t] = u.T
-            phi_x[t + 1] = x.T
-        return phi_x, phi_u
+        return impulse_responses(instance, self, steps)
 
     def __repr__(self):
         links, self_loops = count_links(self.support)

@@ -1,6 +1,6 @@
 """Sparse static gains by an ℓ1-regularized SDP with a diagonal Lyapunov matrix.
 
-With ``u = -K x`` (DESIGN.md §5; the designs returned here store the evaluator's
+With ``u = -K x`` (docs/methods.md; the designs returned here store the evaluator's
 ``u = K x``, i.e. the negated gain) and ``K = Y X⁻¹``:
 
     minimize    [tr(QX) + tr(R Y X⁻¹ Y')] / trace(P) + γ Σ_{i≠j} |Y_ij|
@@ -8,7 +8,7 @@ With ``u = -K x`` (DESIGN.md §5; the designs returned here store the evaluator'
 
 The LMI is A_cl X A_cl' + I ⪯ X, so X bounds the closed-loop covariance sum and
 the bracket bounds trace(P_K) from above; every solution stabilizes. γ is in
-units of the normalized cost, as in :mod:`baselines.sparse_admm` (DESIGN.md's γ
+units of the normalized cost, as in :mod:`baselines.sparse_admm` (the lqrsp γ
 is this one times trace(P), the LQR cost). X is
 diagonal so that the pattern of Y is the pattern of K (with X full a sparse Y
 gives a dense K); the price is that the bound is loose, so J(K) is always

@@ -22,7 +22,9 @@ from .design import (
 from .evaluation import (
     Rollout,
     compare_exact_and_simulated,
+    control_variate_estimate,
     exact_cost,
+    impulse_responses,
     response_cost,
     simulate,
     spectral_radius,
@@ -61,6 +63,8 @@ __all__ = [
     "simulate",
     "Rollout",
     "exact_cost",
+    "impulse_responses",
+    "control_variate_estimate",
     "compare_exact_and_simulated",
     "spectral_radius",
     "GRNNController",

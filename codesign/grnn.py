@@ -106,7 +106,7 @@ class GRNNController:
 
 
 def grnn_defaults() -> dict:
-    """The paper code's training settings (DESIGN.md Sec. 3), by name."""
+    """The paper code's training settings (docs/methods.md), by name."""
     return dict(
         steps=750, batch=20, hidden=5, lr=0.02, l1_lr=0.03, clip=10.0, frob=2.0,
         ensemble=2, refine_ensemble=1, threshold=4e-3, curve_every=10, curve_size=100,
@@ -340,6 +340,7 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
     extras["curve"] = _curve(result)
     extras["spectral_radius"] = spectral_radius(controller.linearized_closed_loop(job.instance))
     rollout = simulate(job.instance, controller)
+    extras.update(rollout.summary())
     steps = int(job.settings["stability_steps"])
     if steps:
         long = simulate(job.instance, controller, validation_set(job.instance)[:job.settings["stability_size"]],
@@ -416,7 +417,8 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
     Returns
     -------
     Design
-        ``cost`` is simulated on the instance's validation set (1000 draws) with
+        ``cost`` is simulated on the instance's validation set (2000 draws; the
+        control-variate estimate, the sample mean in ``extras["plain_cost"]``) with
         its standard error; ``extras`` holds the training curve
         (``extras["curve"] = {"step": [...], "cost": [...]}``), the linearized
         closed loop's ``spectral_radius`` and whether a ``stability_steps``

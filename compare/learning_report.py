@@ -17,7 +17,7 @@ import scipy.stats
 __all__ = ["table1_markdown", "training_curves_figure", "bootstrap_interval", "PAPER_TABLE1", "PAPER_SPARSE_EDGES",
            "GAP_NOTES", "SPARSE_EDGES_NOTE"]
 
-#: Paper Table 1 (DESIGN.md Sec. 7): median normalized cost over 50 instances; autonomous is a mean.
+#: Paper Table 1 (docs/reproduction.md): median normalized cost over 50 instances; autonomous is a mean.
 PAPER_TABLE1 = {
     "autonomous": {0.995: 2.534, 1.05: 69.294},
     "grnn": {0.995: 1.112, 1.05: 1.153},

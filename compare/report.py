@@ -554,7 +554,7 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         lines += ["The dotted vertical line in the figure is the median number of off-diagonal plant-graph "
                   "links: below it no communication graph relaying one hop per step is quadratically "
                   "invariant on this family, so no convex delay-constrained design with the GRNN's "
-                  "information model exists there (DESIGN.md §5).", ""]
+                  "information model exists there (docs/information-models.md).", ""]
     lines += _learning_sections(records, out, files, load_controller, meta, members)
     lines += _fingerprint_lines(records, meta)
     lines += ["## Runs by status", "", "| status | designs |", "|---|---:|"]

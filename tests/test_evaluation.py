@@ -2,6 +2,7 @@ import control
 import numpy as np
 import pytest
 
+from codesign.evaluation import VALIDATION_SIZE
 from codesign import (
     StaticGain,
     ZeroInput,
@@ -47,6 +48,10 @@ def test_exact_and_simulated_agree_for_random_stabilizing_gains(inst):
     for _ in range(4):
         check = compare_exact_and_simulated(inst, StaticGain(_random_stabilizing_gain(inst, rng)))
         assert abs(check["z"]) < 3, check
+        # J(x0) of a linear controller is a quadratic form, which the control
+        # variates span: the estimate is the exact cost up to rounding. A wrong
+        # feature mean would show here as an O(1) error.
+        assert check["control_variate"] == pytest.approx(check["exact"], rel=1e-9)
 
 
 def test_exact_and_simulated_agree_under_process_noise(inst):
@@ -84,7 +89,7 @@ def test_response_cost_matches_static_gain_cost(inst):
 
 def test_validation_set_is_fixed_and_seeded(inst):
     a, b = validation_set(inst), validation_set(inst)
-    assert a.shape == (1000, inst.n) and np.array_equal(a, b)
+    assert a.shape == (VALIDATION_SIZE, inst.n) and np.array_equal(a, b)
     assert not np.array_equal(a, validation_set(paper_instance(12)))
     assert not np.array_equal(validation_set(inst, 10), validation_set(inst, 10, seed=99))
 

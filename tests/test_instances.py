@@ -42,7 +42,7 @@ def test_average_nonzeros_over_200_seeds():
     counts = [paper_instance(seed).comm_adj.sum() for seed in range(200)]
     assert 135 <= np.mean(counts) <= 145
     plant = [paper_instance(seed).plant_adj.sum() - 20 for seed in range(0, 200, 10)]
-    assert 250 <= np.mean(plant) <= 310  # DESIGN.md §1: ~266-300 off-diagonal plant links
+    assert 250 <= np.mean(plant) <= 310  # docs/problem.md: ~266-300 off-diagonal plant links
 
 
 def test_same_seed_same_instance_and_different_seeds_differ():

@@ -184,10 +184,12 @@ def table1_markdown(records) -> str:
                 statuses[r.get("status")] += 1
             notes.append(f"{label}: " + ", ".join(f"{v} {k}" for k, v in sorted(statuses.items())))
     text = "\n".join(lines) + "\n"
-    text += ("\nCosts: E[J]/trace(P) on the 1000-draw validation set (medians over instances; "
+    text += ("\nCosts: E[J]/trace(P), exact for linear controllers and a control-variate estimate on the "
+             "validation set for learned ones (medians over instances; "
              "Autonomous: mean), with a 95 % bootstrap interval over instances. Links: mean directed "
              "off-diagonal links; in parentheses with self-loops, the convention of the paper's "
              "53.4 / 56.1 for GRNN-Sparse, with a 95 % bootstrap interval of that mean.\n")
+    text += _variant_pairs(records, a_norms)
     if outside:
         text += "\nPaper values outside our 95 % interval, and why:\n\n"
         for method, label, a, stat, paper, low, high in outside:
@@ -203,6 +205,35 @@ def table1_markdown(records) -> str:
     if notes:
         text += "\nNon-optimal designs (left out of the statistics): " + "; ".join(notes) + "\n"
     return text
+
+
+def _variant_pairs(records, a_norms) -> str:
+    """Paired differences between the GRNN variants, instance by instance."""
+    from .statistics import paired_difference
+
+    variants = [m for m in _ROW_ORDER if m.startswith("grnn") and any(r.get("method") == m for r in records)]
+    if len(variants) < 2:
+        return ""
+    label = {r["method"]: r.get("label") or r["method"] for r in records}
+    lines = ["", "Paired differences between the GRNN variants (first minus second, per instance; negative: the "
+             "first is better): instances where each is better, median difference and a distribution-free 95 % "
+             "interval for it.", "", "| pair | ‖A‖ | instances | first better | second better | median Δ | 95 % interval | |",
+             "|---|---|---:|---:|---:|---:|---|---|"]
+    for a in a_norms:
+        costs = {m: {json.dumps(r["instance"], sort_keys=True): r["cost"] for r in records
+                     if r.get("method") == m and _a_norm(r) == a and _ok(r)} for m in variants}
+        keys = sorted(set().union(*(c.keys() for c in costs.values())))
+        for i, first in enumerate(variants):
+            for second in variants[i + 1:]:
+                x = [costs[first].get(k, np.inf) for k in keys]
+                y = [costs[second].get(k, np.inf) for k in keys]
+                p = paired_difference(label[first], label[second], x, y)
+                if not p.instances:
+                    continue
+                note = "interval contains 0" if p.inconclusive else ""
+                lines.append(f"| {p.a} − {p.b} | {a:g} | {p.instances} | {p.a_wins} | {p.b_wins} | "
+                             f"{p.median:+.4f} | [{p.low:+.4f}, {p.high:+.4f}] | {note} |")
+    return "\n".join(lines) + "\n"
 
 
 def training_curves_figure(records, ax=None):

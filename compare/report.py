@@ -18,8 +18,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter  # noqa: E402
+from matplotlib.ticker import FuncFormatter  # noqa: E402
 
 __all__ = [
     "Point",
@@ -34,13 +33,11 @@ __all__ = [
     "INFO_STYLE",
 ]
 
-#: Marker and line style per information model, so that a zero-delay static gain and
-#: a one-step-delay dynamic controller with the same link count never look alike.
-INFO_STYLE = {
-    "instantaneous": {"marker": "o", "linestyle": "-", "description": "instantaneous (zero-delay links)"},
-    "delayed": {"marker": "s", "linestyle": "--", "description": "delayed (one step per hop)"},
-    "none": {"marker": "D", "linestyle": ":", "description": "no communication"},
-}
+from .figures import LINESTYLES, OFF_SCALE  # noqa: E402
+
+#: Line style per information model, so that a zero-delay static gain and a
+#: one-step-delay dynamic controller with the same link count never look alike.
+INFO_STYLE = {info: {"linestyle": style, "description": text} for info, (style, text) in LINESTYLES.items()}
 
 _PACKAGES = ("grnn-codesign", "numpy", "scipy", "cvxpy", "clarabel", "control", "torch", "networkx", "matplotlib")
 
@@ -162,19 +159,6 @@ def plant_links(records: list[dict], facts: dict | None = None) -> dict:
     return {panel: float(np.median(v)) for panel, v in per_panel.items()}
 
 
-#: Designs whose median cost is more than this times centralized LQR's are off the
-#: interesting range: they are drawn as labelled triangles on the top edge so that
-#: the open loop (up to ~1e7 on unstable instances) does not flatten everyone else.
-OFF_SCALE = 2.0
-
-
-def _label_colors(labels) -> dict:
-    # tab10, then Dark2's hues: 18 colours that stay distinct (tab20's light shades
-    # are hard to tell from their dark twins).
-    palette = list(plt.get_cmap("tab10").colors) + list(plt.get_cmap("Dark2").colors)
-    return {label: palette[i % len(palette)] for i, label in enumerate(labels)}
-
-
 def _panel_top(points) -> float | None:
     """Upper y limit of a panel, or None to show everything (no design is off the scale)."""
     shown = [p for p in points if p.cost[1] <= OFF_SCALE]
@@ -183,13 +167,34 @@ def _panel_top(points) -> float | None:
     return min(OFF_SCALE, max(p.cost[2] for p in shown)) * 1.03
 
 
+def _dodge(series_by_label: dict, right: float) -> dict:
+    """Label -> horizontal offset in points for single-setting methods that share an x position.
+
+    LQR, decentralized and autonomous sit at 0 or N(N-1) links, exactly where path
+    methods end: without an offset their markers hide each other.
+    """
+    at = defaultdict(list)
+    for label, series in series_by_label.items():
+        if len(series) == 1:
+            at[round(series[0].links[1], 6)].append(label)
+    crowded = {x for x in at if len(at[x]) > 1 or any(
+        len(s) > 1 and any(round(p.links[1], 6) == x for p in s) for s in series_by_label.values())}
+    offsets = {}
+    for x in crowded:
+        group = sorted(at[x])
+        for i, label in enumerate(group):
+            offsets[label] = 7.0 * (i - (len(group) - 1) / 2) + (6.0 if x == 0 else -6.0 if x >= right else 0.0)
+    return offsets
+
+
 def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = None,
                        boundaries: dict | None = None):
     """Median cost against median links per design setting, one panel per instance family/size/a_norm.
 
-    Error bars span the 25–75 % quantiles on both axes; the x-axis is symmetric-log
-    so that zero-link designs stay visible; markers and line styles encode the
-    information model.
+    Error bars span the 25–75 % quantiles on both axes, and the two medians are
+    taken separately (a point need not be any one instance's design). The x-axis is
+    symmetric-log so that zero-link designs stay visible; each method has a colour
+    and a marker, and the line style gives the information model.
 
     Parameters
     ----------
@@ -198,88 +203,80 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
     axes : sequence of matplotlib Axes, optional
         One per panel; a new figure is made if omitted.
     colors : dict, optional
-        Label -> colour.
+        Label -> (colour, marker) as from :func:`compare.figures.label_styles`,
+        or label -> colour.
     boundaries : dict, optional
-        Panel -> link count of the plant graph, drawn as the QI boundary.
+        Panel -> link count of the plant graph, drawn as the QI boundary when a
+        delayed method is present.
 
     Returns
     -------
     fig, axes
     """
+    from matplotlib.transforms import offset_copy
+
+    from .figures import _grid, cost_axis, draw_boundary, finish_legend, label_styles, legend_handles
+
     panels = sorted({p.panel for p in points})
     labels = list(dict.fromkeys(p.label for p in sorted(points, key=lambda p: p.label)))
-    colors = colors or _label_colors(labels)
+    styles = label_styles(labels)
+    for label, value in (colors or {}).items():
+        styles[label] = value if isinstance(value, tuple) and len(value) == 2 and isinstance(value[1], str) \
+            else (value, styles.get(label, (None, "o"))[1])
     spare = None
     if axes is None:
-        ncols = min(3, max(1, len(panels)))
-        nrows = -(-max(1, len(panels)) // ncols)
-        fig, grid = plt.subplots(nrows, ncols, figsize=(6.0 * ncols, 4.8 * nrows), squeeze=False)
-        axes = list(grid.ravel())
-        for extra in axes[max(1, len(panels)):]:
-            extra.set_axis_off()
-        spare = axes[-1] if len(axes) > len(panels) else None  # the legend goes there
-        axes = axes[:max(1, len(panels))]
+        fig, axes, spare = _grid(len(panels))
     else:
         fig = axes[0].figure
     for ax, panel in zip(axes, panels):
         usable = [p for p in points if p.panel == panel and p.ok > 0]
+        if not usable:
+            continue
         top = _panel_top(usable)
+        right = max(p.links[1] for p in usable)
+        by_label = {label: sorted((p for p in usable if p.label == label), key=lambda p: (p.links[1], p.cost[1]))
+                    for label in labels}
+        offsets = _dodge({k: v for k, v in by_label.items() if v}, right)
         for label in labels:
-            pts = [p for p in usable if p.label == label]
-            for info in sorted({p.info_model for p in pts}):
-                series = sorted((p for p in pts if p.info_model == info), key=lambda p: (p.links[1], p.cost[1]))
-                style = INFO_STYLE[info]
+            colour, marker = styles[label]
+            for info in sorted({p.info_model for p in by_label[label]}):
+                series = [p for p in by_label[label] if p.info_model == info]
                 x = np.array([p.links[1] for p in series])
                 y = np.array([p.cost[1] for p in series])
                 xerr = np.array([[p.links[1] - p.links[0] for p in series], [p.links[2] - p.links[1] for p in series]])
                 yerr = np.array([[p.cost[1] - p.cost[0] for p in series], [p.cost[2] - p.cost[1] for p in series]])
+                transform = ax.transData
+                if label in offsets:
+                    transform = offset_copy(ax.transData, fig=fig, x=offsets[label], units="points")
                 ax.errorbar(
-                    x, y, xerr=xerr, yerr=yerr, color=colors[label], marker=style["marker"],
-                    linestyle=style["linestyle"] if len(series) > 1 else "none",
-                    markersize=6, capsize=2, elinewidth=0.8, linewidth=1.2,
+                    x, y, xerr=xerr, yerr=yerr, color=colour, marker=marker,
+                    linestyle=INFO_STYLE[info]["linestyle"] if len(series) > 1 else "none",
+                    markersize=6, capsize=2, elinewidth=0.8, linewidth=1.2, transform=transform,
+                    markeredgecolor="white" if len(series) == 1 else colour, markeredgewidth=0.6, zorder=3,
                 )
-        ax.set_xscale("symlog", linthresh=1.0)
-        plain = FuncFormatter(lambda value, _: f"{value:g}")
+        low = min(0.98, min(p.cost[0] for p in usable) * 0.99)
         if top is None:
-            ax.set_yscale("log")
-            ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-            ax.yaxis.set_major_formatter(plain)
-            ax.yaxis.set_minor_formatter(NullFormatter())
+            cost_axis(ax, low, max(p.cost[2] for p in usable) * 1.03)
         else:
-            low = min(0.98, min(p.cost[0] for p in usable) * 0.99)
-            ax.set_ylim(low, top)
+            cost_axis(ax, low, top)
             for p in usable:
                 if p.cost[1] > top:
-                    ax.plot(p.links[1], top, marker="^", color=colors[p.label], markersize=8, clip_on=False,
+                    ax.plot(p.links[1], top, marker="^", color=styles[p.label][0], markersize=8, clip_on=False,
                             linestyle="none", zorder=5)
                     ax.annotate(f"{p.cost[1]:.3g}", (p.links[1], top), xytext=(0, -4), textcoords="offset points",
-                                ha="center", va="top", fontsize=7, color=colors[p.label])
-        ax.xaxis.set_major_formatter(plain)
+                                ha="center", va="top", fontsize=7, color=styles[p.label][0])
+        ax.set_xscale("symlog", linthresh=1.0)
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
         ax.set_xlim(left=-0.4)
         ax.set_xlabel("directed off-diagonal links (median, IQR bars)")
         ax.set_ylabel("normalized cost E[J] / tr(P) (median, IQR bars)")
         ax.set_title(panel_title(panel))
         ax.axhline(1.0, color="0.6", linewidth=0.8, zorder=0)
-        if boundaries and panel in boundaries:
-            ax.axvline(boundaries[panel], color="0.35", linestyle=(0, (1, 2)), linewidth=1.0, zorder=0)
-            ax.annotate("plant graph\n(QI boundary)", (boundaries[panel], 1.0), xytext=(-4, 4),
-                        textcoords="offset points", ha="right", va="bottom", fontsize=7, color="0.35")
+        if boundaries and panel in boundaries and any(p.info_model == "delayed" for p in usable):
+            draw_boundary(ax, boundaries[panel])
         ax.grid(True, which="major", alpha=0.3)
-    handles = [Line2D([], [], color=colors[label], marker="o", linestyle="-", label=label) for label in labels]
-    used = sorted({p.info_model for p in points if p.ok > 0}, key=list(INFO_STYLE).index)
-    handles += [
-        Line2D([], [], color="0.3", marker=INFO_STYLE[i]["marker"], linestyle=INFO_STYLE[i]["linestyle"],
-               label=INFO_STYLE[i]["description"])
-        for i in used
-    ]
-    if spare is not None:
-        spare.legend(handles=handles, loc="center", ncol=1 if len(handles) <= 16 else 2, frameon=False)
-        fig.tight_layout()
-        return fig, axes
-    ncol = min(4, len(handles))
-    rows = -(-len(handles) // ncol)
-    fig.legend(handles=handles, loc="lower center", ncol=ncol, frameon=False, bbox_to_anchor=(0.5, 0.0))
-    fig.tight_layout(rect=(0, min(0.5, (0.25 * rows + 0.2) / fig.get_figheight()), 1, 1))
+    used = {p.info_model for p in points if p.ok > 0}
+    finish_legend(fig, axes, spare, legend_handles(styles, labels, used))
     return fig, axes
 
 
@@ -330,19 +327,91 @@ def _summary_tables(points: list[Point]) -> list[str]:
 
 
 def _budget_tables(records: list[dict], budgets=(20, 60, 140, None)) -> list[str]:
-    table = budget_costs(records, budgets)
+    """The budget fronts at a few budgets, with the number of instances where some design fits."""
+    from .statistics import budget_fronts
+
+    fronts = {(f.panel, f.label): f for f in budget_fronts(records)}
+    table = {key: [(fronts[key].at(np.inf if b is None else b)[1], k) for (_, k), b in zip(cells, budgets)]
+             for key, cells in budget_costs(records, budgets).items()}
     heads = [f"≤ {b} links" if b is not None else "any" for b in budgets]
     lines = []
     for panel in sorted({key[0] for key in table}):
-        lines += [f"### {panel_title(panel)}", "", "| method | " + " | ".join(heads) + " |",
+        lines += [f"### {panel_title(panel)}", "", "Median over instances of the best cost within the budget "
+                  "(∞ where fewer than half the instances have a design within it), and in parentheses the "
+                  "instances with one.", "", "| method | " + " | ".join(heads) + " |",
                   "|---|" + "---:|" * len(budgets)]
         for (pnl, label), cells in table.items():
             if pnl != panel:
                 continue
-            text = [f"{_fmt(m)} ({k})" if k else "—" for m, k in cells]
+            text = [(f"{_fmt(m)} ({k})" if np.isfinite(m) else f"∞ ({k})") if k else "—" for m, k in cells]
             lines.append(f"| {label} | " + " | ".join(text) + " |")
         lines.append("")
     return lines
+
+
+def _paired_table(comparisons: dict, title: str) -> list[str]:
+    lines = []
+    for panel, rows in comparisons.items():
+        rows = [r for r in rows if r.instances]
+        if not rows:
+            continue
+        lines += [f"### {title}, {panel_title(panel)}", "",
+                  "| first − second | budget | instances | first better | second better | median Δ | 95 % interval |"
+                  " note |", "|---|---|---:|---:|---:|---:|---|---|"]
+        for r in rows:
+            budget = "any" if r.budget is None else f"≤ {r.budget:g}"
+            interval = f"[{r.low:+.4f}, {r.high:+.4f}]" + ("" if r.coverage >= 0.95 else f" ({r.coverage:.0%})")
+            note = "interval contains 0" if r.inconclusive else ""
+            lines.append(f"| {r.a} − {r.b} | {budget} | {r.instances} | {r.a_wins} | {r.b_wins} | "
+                         f"{r.median:+.4f} | {interval} | {note} |")
+        lines.append("")
+    return lines
+
+
+def _paired_lines(records: list[dict], meta: dict) -> list[str]:
+    """GRNN-Sparse against every other method, and the pairs the specs ask for, per budget."""
+    from .statistics import paired_comparisons
+
+    labels = {r["label"] for r in records}
+    by_method = {r["method"]: r["label"] for r in records}
+    lines = []
+    reference = by_method.get("grnn_sparse")
+    if reference:
+        lines += _paired_table(paired_comparisons(records, reference), f"{reference} against every method")
+    asked = []
+    for key, pairs in sorted(meta.items()):
+        if key.startswith("pairs:"):
+            for first, second in pairs:
+                pair = tuple(by_method.get(x, x) for x in (first, second))
+                if all(x in labels for x in pair) and pair not in asked and pair[0] != reference:
+                    asked.append(pair)
+    for first, second in asked:
+        lines += _paired_table(paired_comparisons(records, first, others={second}), f"{first} against {second}")
+    if not lines:
+        return []
+    return ["## Paired comparisons", "",
+            "Every method runs on the same instances, so methods are compared instance by instance: within each "
+            "link budget, the difference of the two methods' best costs on every instance where both have a "
+            "design that fits (negative: the first is better), how many instances each wins, the median "
+            "difference, and a distribution-free 95 % interval for it (order statistics, binomial ranks; the "
+            "achieved coverage is given where fewer instances allow no 95 % interval). Where the interval "
+            "contains 0, the instances do not say which method is better.", ""] + lines
+
+
+def _environment_lines(meta: dict) -> list[str]:
+    """Where each experiment's runs were computed (recorded by the runner when it computed runs)."""
+    rows = [(k.split(":", 1)[1], v) for k, v in sorted(meta.items()) if k.startswith("environment:")]
+    if not rows:
+        return []
+    lines = ["| experiment | computed | commit | CPU | workers (of cores) | python |", "|---|---|---|---|---|---|"]
+    for name, env in rows:
+        lines.append(f"| {name} | {env.get('date', '—')} | {env.get('commit') or '—'} | {env.get('cpu', '—')} | "
+                     f"{env.get('workers', '—')} ({env.get('executor', 'process')}; {env.get('cores', '—')} cores) | "
+                     f"{env.get('python', '—')} |")
+    return lines + ["", "Package versions: see Software and Code fingerprints below. Exact costs are reproducible "
+                    "to rounding on any machine with the same package versions; learned controllers can differ "
+                    "in the last digits across CPUs and BLAS builds (float rounding in training), and wall times "
+                    "always differ.", ""]
 
 
 def _pareto_tables(points: list[Point]) -> list[str]:
@@ -504,7 +573,15 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     facts = {k.split(":", 1)[1]: v for k, v in meta.items() if k.startswith("instance:")}
     boundaries = plant_links(records, facts)
     files = {}
-    fig, _ = plot_cost_vs_links(points, boundaries=boundaries)
+    from .figures import label_styles, plot_budget_fronts
+    from .statistics import budget_fronts
+
+    styles = label_styles(sorted({r["label"] for r in records}))
+    fronts = budget_fronts(records)
+    if fronts:
+        fig, _ = plot_budget_fronts(fronts, styles=styles, boundaries=boundaries)
+        _save_figure(fig, out, "budget_fronts", files)
+    fig, _ = plot_cost_vs_links(points, colors=styles, boundaries=boundaries)
     _save_figure(fig, out, "cost_vs_links", files)
     files["csv"] = out / "runs.csv"
     _write_csv(records, files["csv"])
@@ -519,34 +596,51 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         how += (" (runs already in the store are skipped), or from the stored results alone with "
                 if run_commands else "Regenerate from the stored results with ") + f"`{rebuild}`."
         lines += [how, ""]
+    lines += _environment_lines(meta)
     lines += [
         f"{len(runs)} runs on {len(instances)} instances, {len(records)} designs. "
         "Costs are E[J] / trace(P) over the horizon (centralized LQR = 1); links are directed off-diagonal "
         "communication links (self-loops are local feedback and listed separately). "
-        "Exact closed-form costs for linear controllers, validation-set estimates for learned ones."
+        "Exact closed-form costs for linear controllers; for learned ones a control-variate estimate on the "
+        "validation set, shared by every method on an instance (relative standard error about 0.01 %; "
+        "`runs.csv` has the plain sample mean too)."
         + (f" The store also holds {superseded} runs made by code that has changed since; they are not "
            "shown (see Code fingerprints)." if superseded else ""),
         "",
+    ]
+    if fronts:
+        lines += [
+            "## Best cost within a link budget",
+            "",
+            "![budget fronts](budget_fronts.png)",
+            "",
+            "For a budget of L links, each method's best cost on an instance is the lowest cost among its "
+            "designs there with at most L directed off-diagonal links. The curve is the median of that over "
+            "instances and the band its 25–75 % range, as a step function of L: read it off at any budget. "
+            "A marker shows where a curve starts (the smallest budget at which at least half the instances "
+            "have a design); line styles give the information model.",
+            "",
+        ]
+        lines += _budget_tables(records)
+    lines += _paired_lines(records, meta)
+    lines += [
+        "## Cost against links per setting (paper Fig. 3 style)",
+        "",
         "![cost versus links](cost_vs_links.png)",
         "",
-        "Markers and line styles give the information model: "
-        + "; ".join(f"{v['marker']!r} {v['description']}" for v in INFO_STYLE.values())
-        + ". Points are medians over instances with 25–75 % bars on both axes. Where some design's median "
-        f"cost is above {OFF_SCALE:g} (twice centralized LQR), that design is a triangle on the panel's top "
-        "edge with its median printed under it.",
+        "One point per method setting (e.g. one γ or β): the median links over instances against the median "
+        "cost over instances, with 25–75 % bars on both axes. The two medians are taken separately, so a "
+        "point need not be any one instance's design; the budget fronts above are per instance. Each method "
+        "has a colour and a marker; line styles give the information model ("
+        + "; ".join(f"{v['linestyle']} {v['description']}" for v in INFO_STYLE.values())
+        + f"). Where some design's median cost is above {OFF_SCALE:g} (twice centralized LQR), that design "
+        "is a triangle on the panel's top edge with its median printed under it. Single-setting methods that "
+        "share a link count with another method are shifted sideways by a few points so that neither hides.",
         "",
         "## Medians by method",
         "",
     ]
     lines += _summary_tables(points)
-    lines += [
-        "## Best cost within a link budget",
-        "",
-        "Per instance, the lowest cost a method reaches with at most that many links; the median over "
-        "instances, with the number of instances where some design fits in parentheses.",
-        "",
-    ]
-    lines += _budget_tables(records)
     lines += ["## Pareto fronts", "", "Settings no other setting of the same method beats on both median "
               "links and median cost.", ""]
     lines += _pareto_tables(points)

@@ -23,6 +23,7 @@ from tqdm.auto import tqdm
 from codesign import Design, count_links, paper_instance
 from codesign.scoring import evaluate
 
+from .environment import environment
 from .fingerprint import fingerprint_details
 from .plugins import load_plugins
 from .registry import get_method
@@ -245,6 +246,7 @@ def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store) -> None:
     """Store what the report needs beside the runs: the spec, methods, fingerprints and instance facts."""
     store.set_meta(f"spec:{spec.name}", spec.source)
     store.set_meta(f"sections:{spec.name}", list(spec.sections))
+    store.set_meta(f"pairs:{spec.name}", [list(pair) for pair in spec.pairs])
     store.set_members(spec.name, [run.key for run in runs])
     for name in dict.fromkeys(run.method for run in runs):
         m = get_method(name)
@@ -324,6 +326,10 @@ def run_experiment(
             with open_executor(executor or "process", workers) as pool:
                 _drain(pool, tasks, spec.plugins, record)
 
+    if pending:
+        executor_name = executor if isinstance(executor, str) else type(executor).__name__ if executor else "process"
+        store.set_meta(f"environment:{spec.name}", environment(1 if executor is None and workers <= 1 else workers,
+                                                               executor_name))
     told = False
     try:
         while pending:

@@ -17,6 +17,7 @@ their hyperparameters and grids, and evaluation settings. It expands into
 
     [report]
     sections = ["table1", "training_curves"]       # optional report sections this experiment asks for
+    pairs = [["GRNN-Sparse", "Sparse l1 ADMM"]]     # optional paired comparisons (labels or method names)
 
     [evaluation]
     validation_size = 1000
@@ -191,6 +192,7 @@ class ExperimentSpec:
     source: str = ""
     plugins: tuple = ()
     sections: tuple = ()
+    pairs: tuple = ()
 
     def runs(self) -> list[Run]:
         """Every run of the experiment, instance-major, keyed with its method's code fingerprint."""
@@ -259,7 +261,7 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
         except PluginError as exc:
             raise SpecError(f"{where}: {exc}") from None
         loaded.append(plugin)
-    sections = _parse_report(_typed("report", data.get("report", {}), dict))
+    sections, pairs = _parse_report(_typed("report", data.get("report", {}), dict))
     name = _typed("name", data.get("name", default_name), str)
     description = _typed("description", data.get("description", ""), str)
     if "instances" not in data:
@@ -270,18 +272,24 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
     if not raw_methods:
         raise SpecError("methods: the spec needs at least one [[methods]] entry")
     methods = tuple(_parse_method(i, entry, base, loaded) for i, entry in enumerate(raw_methods))
-    return ExperimentSpec(name, description, instances, methods, evaluation, text, tuple(loaded), sections)
+    return ExperimentSpec(name, description, instances, methods, evaluation, text, tuple(loaded), sections, pairs)
 
 
-def _parse_report(table: dict) -> tuple:
-    _check_keys("report", table, {"sections"})
+def _parse_report(table: dict) -> tuple[tuple, tuple]:
+    _check_keys("report", table, {"sections", "pairs"})
     sections = table.get("sections", [])
     if not isinstance(sections, list):
         raise SpecError(f"report.sections: expected a list, got {sections!r}")
     for i, name in enumerate(sections):
         if name not in SECTIONS:
             raise SpecError(f"report.sections[{i}]: unknown section {name!r} (known: {', '.join(SECTIONS)})")
-    return tuple(sections)
+    pairs = table.get("pairs", [])
+    if not isinstance(pairs, list):
+        raise SpecError(f"report.pairs: expected a list of [first, second] pairs, got {pairs!r}")
+    for i, pair in enumerate(pairs):
+        if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(x, str) and x for x in pair)):
+            raise SpecError(f"report.pairs[{i}]: expected [first, second] (method labels or names), got {pair!r}")
+    return tuple(sections), tuple(tuple(pair) for pair in pairs)
 
 
 def _check_keys(where: str, table: dict, allowed: set) -> None:

@@ -54,10 +54,13 @@ def plot_topology_path(instance, path, *, axes=None):
     pos = nx.kamada_kawai_layout(nx.from_numpy_array((instance.comm_adj != 0).astype(int)))
     colors = _leading_eigenvector(instance.A)
     plant_links = int(np.count_nonzero(instance.plant_adj) - np.count_nonzero(np.diag(instance.plant_adj)))
-    _draw(axes[0], instance.plant_adj, pos, colors, f"plant graph\n|E| = {plant_links}")
+    nodes = _draw(axes[0], instance.plant_adj, pos, colors, f"plant graph\n|E| = {plant_links}")
     for ax, (weight, links, cost, support) in zip(axes[1:], path):
         _draw(ax, np.asarray(support), pos, colors, f"β = {weight:.3g}\n|E| = {links}, J = {cost:.3f}")
     fig.tight_layout()
+    bar = fig.colorbar(nodes, ax=list(axes), fraction=0.015, pad=0.01)
+    bar.set_label("|leading eigenvector of A|", fontsize=7)
+    bar.ax.tick_params(labelsize=6)
     return fig, axes
 
 

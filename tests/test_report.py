@@ -37,13 +37,42 @@ def test_budget_costs_take_best_design_within_budget_per_instance():
 
 
 def test_plant_boundary_and_plot_handles():
-    records = [_rec(inst, "m", 5, 1.2) for inst in INST]
+    records = [_rec(inst, "m", 5, 1.2, info="delayed") for inst in INST]
     boundary = plant_links(records)
     (panel, links), = boundary.items()
     assert 0 < links <= 8 * 7
     fig, axes = plot_cost_vs_links(aggregate(records), boundaries=boundary)
     assert len(axes) == 1 and axes[0].get_xscale() == "symlog"
     assert np.isclose(axes[0].lines[-1].get_xdata()[0], links)
+
+
+def _vertical_lines(ax):
+    return [line for line in ax.lines if len(set(line.get_xdata())) == 1 and len(line.get_xdata()) == 2]
+
+
+def test_qi_boundary_only_with_a_delayed_method_and_linear_axis_for_a_narrow_range():
+    records = [_rec(inst, "m", 5, 1.2) for inst in INST] + [_rec(inst, "lqr", 56, 1.0) for inst in INST]
+    fig, axes = plot_cost_vs_links(aggregate(records), boundaries=plant_links(records))
+    assert not _vertical_lines(axes[0])
+    assert axes[0].get_yscale() == "linear"
+    labels = [t.get_text() for t in axes[0].get_yticklabels() if t.get_text()]
+    assert len(labels) >= 3  # a narrow range still gets several labelled ticks
+
+
+def test_single_setting_methods_at_the_same_link_count_are_dodged():
+    from compare.report import _dodge
+
+    records = [_rec(inst, label, 0, 1.3) for inst in INST for label in ("autonomous", "decentralized")]
+    points = aggregate(records)
+    offsets = _dodge({p.label: [p] for p in points}, right=56)
+    assert len(offsets) == 2 and len(set(offsets.values())) == 2
+
+
+def test_many_methods_get_distinct_colour_and_marker_pairs():
+    from compare.figures import label_styles
+
+    styles = label_styles([f"method {i}" for i in range(30)])
+    assert len({(tuple(c), m) for c, m in styles.values()}) == 30
 
 
 def test_topology_path_prefers_the_papers_a_norm_then_the_longest_path_and_draws_each_design():

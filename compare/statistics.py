@@ -1,0 +1,185 @@
+"""Budget fronts and paired comparisons: every method runs on the same instances, so compare per instance.
+
+A method's *best cost within a budget* L on an instance is the lowest cost among
+its designs there with at most L directed off-diagonal links (infinite when none
+fits, or when the method failed there). Its budget front is the median over
+instances of that best cost as a step function of L, with the 25–75 % band.
+
+Paired comparisons take the per-instance difference of two methods' best costs
+within the same budget, on the instances where both have a design that fits:
+wins, the median difference and a distribution-free 95 % interval for it (order
+statistics of the differences, ranks from the binomial distribution).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter, defaultdict
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+__all__ = ["Front", "budget_fronts", "best_within", "Paired", "paired_difference", "median_interval",
+           "paired_comparisons", "instances_by_panel", "OK_STATUSES"]
+
+OK_STATUSES = ("optimal", "inaccurate")
+# Quantiles of values that may be infinite: replace inf by a huge sentinel, so that a
+# median between a finite and an infinite value reads as "not reached" (inf).
+_SENTINEL = 1e300
+
+
+def _panel(instance: dict) -> tuple:
+    from .report import panel_key
+
+    return panel_key(instance)
+
+
+def _ok(record) -> bool:
+    return record["status"] in OK_STATUSES and np.isfinite(record["cost"])
+
+
+def instances_by_panel(records) -> dict[tuple, list[str]]:
+    """Panel -> the sorted JSON of every instance with a record in it."""
+    out = defaultdict(set)
+    for r in records:
+        out[_panel(r["instance"])].add(json.dumps(r["instance"], sort_keys=True))
+    return {panel: sorted(v) for panel, v in out.items()}
+
+
+def _quantiles(values) -> np.ndarray:
+    """25th, 50th, 75th percentiles along axis 0 of values that may be inf."""
+    finite = np.where(np.isfinite(values), values, _SENTINEL)
+    q = np.percentile(finite, [25, 50, 75], axis=0)
+    return np.where(q >= _SENTINEL / 10, np.inf, q)
+
+
+@dataclass(frozen=True)
+class Front:
+    """A method's budget front on one panel: step function of the link budget.
+
+    ``cost[:, k]`` holds the (25 %, median, 75 %) over ``instances`` instances of
+    the best cost within ``budgets[k]`` links; it holds from ``budgets[k]`` up to
+    the next budget. ``inf`` where fewer than that share of instances has a
+    design within the budget.
+    """
+
+    panel: tuple
+    label: str
+    info_model: str
+    budgets: np.ndarray
+    cost: np.ndarray
+    instances: int
+
+    def at(self, budget: float) -> tuple[float, float, float]:
+        """(25 %, median, 75 %) of the best cost within ``budget`` links."""
+        k = np.searchsorted(self.budgets, budget, side="right") - 1
+        if k < 0:
+            return (np.inf,) * 3
+        return tuple(float(v) for v in self.cost[:, k])
+
+
+def best_within(records, panel_instances: list[str], budgets) -> np.ndarray:
+    """Best cost per (instance, budget) of one method's records: shape (instances, budgets)."""
+    index = {inst: i for i, inst in enumerate(panel_instances)}
+    budgets = np.asarray(budgets, dtype=float)
+    best = np.full((len(panel_instances), budgets.size), np.inf)
+    for r in records:
+        if _ok(r):
+            i = index[json.dumps(r["instance"], sort_keys=True)]
+            fits = budgets >= r["links"]
+            best[i, fits] = np.minimum(best[i, fits], r["cost"])
+    return best
+
+
+def budget_fronts(records) -> list[Front]:
+    """One :class:`Front` per (panel, label), evaluated at every link count any design of it has."""
+    panels = instances_by_panel(records)
+    groups = defaultdict(list)
+    for r in records:
+        groups[(_panel(r["instance"]), r["label"])].append(r)
+    fronts = []
+    for (panel, label), rs in sorted(groups.items()):
+        budgets = np.unique([0.0] + [float(r["links"]) for r in rs if _ok(r)])
+        best = best_within(rs, panels[panel], budgets)
+        info = Counter(r["info_model"] for r in rs).most_common(1)[0][0]
+        fronts.append(Front(panel, label, info, budgets, _quantiles(best), len(panels[panel])))
+    return fronts
+
+
+def median_interval(differences, confidence: float = 0.95) -> tuple[float, float, float]:
+    """Distribution-free interval for the median of i.i.d. differences: (low, high, coverage).
+
+    The interval between the k-th smallest and k-th largest value covers the median
+    with probability 1 − 2 P(Binomial(n, ½) ≤ k − 1); k is the largest rank that
+    keeps this at least ``confidence``. With too few values for that, the full range
+    and its (lower) coverage are returned.
+    """
+    d = np.sort(np.asarray(differences, dtype=float))
+    n = d.size
+    if n == 0:
+        return float("nan"), float("nan"), 0.0
+    k = int(stats.binom.ppf((1 - confidence) / 2, n, 0.5))  # P(B <= k) >= alpha/2 first at k
+    while k >= 1 and 1 - 2 * stats.binom.cdf(k - 1, n, 0.5) < confidence:
+        k -= 1
+    k = max(k, 1)
+    coverage = 1 - 2 * stats.binom.cdf(k - 1, n, 0.5)
+    return float(d[k - 1]), float(d[n - k]), float(coverage)
+
+
+@dataclass(frozen=True)
+class Paired:
+    """Paired comparison of method ``a`` against ``b`` (difference a − b; negative: a is better)."""
+
+    a: str
+    b: str
+    budget: float | None
+    instances: int
+    a_wins: int
+    b_wins: int
+    median: float
+    low: float
+    high: float
+    coverage: float
+
+    @property
+    def inconclusive(self) -> bool:
+        """The interval contains 0: the data do not say which is better."""
+        return not (self.high < 0 or self.low > 0)
+
+
+def paired_difference(a_label, b_label, a_costs, b_costs, budget=None, confidence: float = 0.95) -> Paired:
+    """Compare two methods' per-instance costs (arrays aligned by instance, inf = no design)."""
+    a_costs, b_costs = np.asarray(a_costs, dtype=float), np.asarray(b_costs, dtype=float)
+    both = np.isfinite(a_costs) & np.isfinite(b_costs)
+    d = a_costs[both] - b_costs[both]
+    low, high, coverage = median_interval(d, confidence)
+    return Paired(a_label, b_label, budget, int(both.sum()), int((d < 0).sum()), int((d > 0).sum()),
+                  float(np.median(d)) if d.size else float("nan"), low, high, coverage)
+
+
+def paired_comparisons(records, reference: str, budgets=(20, 60, 140, None), others=None) -> dict:
+    """Panel -> list of :class:`Paired` of ``reference`` against every other label, per budget.
+
+    ``budgets`` None means any number of links. ``others`` restricts the labels
+    compared with the reference.
+    """
+    panels = instances_by_panel(records)
+    by_label = defaultdict(lambda: defaultdict(list))
+    for r in records:
+        by_label[_panel(r["instance"])][r["label"]].append(r)
+    grid = np.array([np.inf if b is None else b for b in budgets], dtype=float)
+    out = {}
+    for panel, labels in sorted(by_label.items()):
+        if reference not in labels:
+            continue
+        ref = best_within(labels[reference], panels[panel], grid)
+        rows = []
+        for label in sorted(labels):
+            if label == reference or (others is not None and label not in others):
+                continue
+            other = best_within(labels[label], panels[panel], grid)
+            rows += [paired_difference(reference, label, ref[:, k], other[:, k], budgets[k])
+                     for k in range(len(budgets))]
+        out[panel] = rows
+    return out

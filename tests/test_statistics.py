@@ -1,0 +1,70 @@
+"""Budget fronts and paired comparisons of the report."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from compare.statistics import budget_fronts, median_interval, paired_comparisons, paired_difference
+
+INST = [{"family": "paper", "seed": s, "n": 8, "a_norm": 1.05} for s in range(4)]
+
+
+def _rec(inst, label, links, cost, status="optimal"):
+    return {"instance": inst, "label": label, "method": label, "params": {}, "links": links, "self_loops": 0,
+            "cost": cost, "status": status, "info_model": "instantaneous", "run_key": "k", "idx": 0}
+
+
+def test_front_is_the_median_over_instances_of_the_best_cost_within_each_budget():
+    records = []
+    for i, inst in enumerate(INST):
+        records += [_rec(inst, "m", 10, 2.0 + i), _rec(inst, "m", 30, 1.5 + i)]
+    records.append(_rec(INST[0], "m", 5, 9.0, status="failed"))
+    (front,) = budget_fronts(records)
+    assert list(front.budgets) == [0, 10, 30]
+    assert front.at(9)[1] == np.inf  # no instance has a design within 9 links
+    assert front.at(10)[1] == pytest.approx(np.median([2, 3, 4, 5]))
+    assert front.at(29)[1] == front.at(10)[1]  # a step function
+    assert front.at(1000)[1] == pytest.approx(np.median([1.5, 2.5, 3.5, 4.5]))
+
+
+def test_an_instance_without_a_design_within_the_budget_counts_as_not_reached():
+    records = [_rec(INST[0], "m", 10, 1.0), _rec(INST[1], "m", 50, 1.0), _rec(INST[2], "m", 50, 1.0),
+               _rec(INST[3], "other", 0, 2.0)]
+    front = next(f for f in budget_fronts(records) if f.label == "m")
+    assert front.instances == 4
+    assert front.at(10)[1] == np.inf  # 1 of 4 instances: the median is not reached
+    # 3 of 4 have one: the median is reached, the 75 % quantile lies between 1 and the missing one.
+    assert front.at(50) == (1.0, 1.0, np.inf)
+
+
+def test_median_interval_has_the_binomial_coverage_and_contains_the_median():
+    rng = np.random.default_rng(0)
+    d = rng.standard_normal(20)
+    low, high, coverage = median_interval(d)
+    assert 0.95 <= coverage == pytest.approx(1 - 2 * stats.binom.cdf(5, 20, 0.5))
+    s = np.sort(d)
+    assert (low, high) == (s[5], s[14]) and low <= np.median(d) <= high
+    # Coverage check by simulation: the interval covers the true median 0 about 95.9 % of the time.
+    hits = np.mean([(lambda lo, hi: lo <= 0 <= hi)(*median_interval(rng.standard_normal(20))[:2])
+                    for _ in range(2000)])
+    assert abs(hits - coverage) < 0.015
+
+
+def test_paired_difference_counts_wins_on_common_instances_only():
+    p = paired_difference("a", "b", [1.0, 1.0, 1.0, np.inf], [2.0, 0.5, 3.0, 1.0])
+    assert (p.instances, p.a_wins, p.b_wins) == (3, 2, 1)
+    assert p.median == pytest.approx(-1.0)
+
+
+def test_paired_comparisons_flag_an_interval_containing_zero():
+    rng = np.random.default_rng(1)
+    insts = [dict(INST[0], seed=s) for s in range(30)]
+    records = []
+    for inst in insts:
+        base = 1 + rng.uniform()
+        records += [_rec(inst, "ref", 10, base + 0.1), _rec(inst, "worse", 10, base + 0.2),
+                    _rec(inst, "same", 10, base + 0.1 + 0.01 * rng.standard_normal())]
+    (rows,) = paired_comparisons(records, "ref", budgets=(None,)).values()
+    by = {r.b: r for r in rows}
+    assert not by["worse"].inconclusive and by["worse"].high < 0 and by["worse"].a_wins == 30
+    assert by["same"].inconclusive

@@ -85,7 +85,8 @@ def draw_boundary(ax, x: float) -> None:
             bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1})
 
 
-def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundaries: dict | None = None):
+def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundaries: dict | None = None,
+                       bounds: dict | None = None):
     """Best cost within each link budget: median over instances (step curve) and 25–75 % band.
 
     Parameters
@@ -97,6 +98,8 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
         Label -> (colour, marker), from :func:`label_styles`.
     boundaries : dict, optional
         Panel -> plant-graph link count, drawn when a delayed method is present.
+    bounds : dict, optional
+        Panel -> (cost, text): a lower bound drawn as a horizontal line.
 
     Returns
     -------
@@ -117,6 +120,8 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
         finite = np.concatenate([f.cost[1][np.isfinite(f.cost[1])] for f in mine])
         if finite.size == 0:
             continue
+        if bounds and panel in bounds:
+            finite = np.append(finite, bounds[panel][0])
         low = min(0.97, float(finite.min()) * 0.98)
         shown = finite[finite <= OFF_SCALE]
         top = float(finite.max()) * 1.03 if shown.size == finite.size else min(OFF_SCALE, float(shown.max())) * 1.05
@@ -144,6 +149,10 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
         ax.set_title(_title(panel) + ("\nabove the axis: " + ", ".join(above[panel]) if panel in above else ""),
                      fontsize=10 if panel in above else None)
         ax.axhline(1.0, color="0.6", linewidth=0.8, zorder=0)
+        if bounds and panel in bounds:
+            value, text = bounds[panel]
+            ax.axhline(value, color="black", linewidth=1.0, linestyle=(0, (4, 2, 1, 2)), zorder=1)
+            ax.text(0.01, value, f" {text}", transform=ax.get_yaxis_transform(), ha="left", va="top", fontsize=7)
         if boundaries and panel in boundaries and any(f.info_model == "delayed" for f in mine):
             draw_boundary(ax, boundaries[panel])
         ax.grid(True, which="major", alpha=0.3)

@@ -398,6 +398,99 @@ def _paired_lines(records: list[dict], meta: dict) -> list[str]:
             "contains 0, the instances do not say which method is better.", ""] + lines
 
 
+def _precision_text(records: list[dict]) -> str:
+    """The relative standard errors of the simulated costs, as measured."""
+    rel = [r["cost_stderr"] / r["cost"] for r in records if r.get("cost_kind") == "simulated"
+           and r["status"] in ("optimal", "inaccurate") and np.isfinite(r["cost"]) and r["cost"] > 0]
+    if not rel:
+        return ""
+    plain = [r["extras"]["plain_cost_stderr"] / r["extras"]["plain_cost"] for r in records
+             if r.get("cost_kind") == "simulated" and "plain_cost_stderr" in r.get("extras", {})
+             and r["status"] in ("optimal", "inaccurate") and r["extras"]["plain_cost"] > 0]
+    cv = sum(str(r["extras"].get("cost_estimator", "")).startswith("control variates") for r in records
+             if r.get("cost_kind") == "simulated" and r["status"] in ("optimal", "inaccurate"))
+    how = "control variates" if cv == len(rel) else f"control variates for {cv} of {len(rel)}, else the sample mean"
+    text = (f" ({how}; relative standard error: median {np.median(rel):.3%}, largest {max(rel):.3%} over "
+            f"{len(rel)} simulated designs")
+    if plain:
+        text += f"; the plain sample mean, kept in `runs.csv`, has a median of {np.median(plain):.2%}"
+    return text + ")"
+
+
+def _sls_bounds(records: list[dict]) -> dict:
+    """Panel -> (median, instances) of SLS on the complete graph at one hop per step, act_delay 1.
+
+    No controller with the delayed information model beats it on its instance
+    (partially nested information: the optimum is linear, and SLS finds it).
+    """
+    per_panel = defaultdict(list)
+    for r in records:
+        p = r["params"]
+        if (r["method"] in ("sls", "sls_topologies") and p.get("graph") == "complete" and p.get("act_delay") == 1
+                and p.get("speed") == 1.0 and p.get("fir") is None and r["status"] in ("optimal", "inaccurate")):
+            per_panel[panel_key(r["instance"])].append(r["cost"])
+    return {panel: (float(np.median(v)), len(v)) for panel, v in per_panel.items()}
+
+
+def _delayed_section(records: list[dict], out: Path, files: dict, styles: dict, boundaries: dict) -> list[str]:
+    """Budget fronts of the methods with the delayed information model, the SLS bound, and which wins."""
+    from .figures import plot_budget_fronts
+    from .statistics import budget_fronts, paired_difference
+
+    delayed = [r for r in records if r["info_model"] == "delayed"]
+    if len({r["label"] for r in delayed}) < 2:
+        return []
+    bounds = _sls_bounds(records)
+    fronts = budget_fronts(delayed)
+    fig, _ = plot_budget_fronts(fronts, styles=styles, boundaries=boundaries,
+                                bounds={k: (v, "SLS, complete graph (bound)") for k, (v, _) in bounds.items()})
+    _save_figure(fig, out, "delayed_fronts", files)
+    lines = ["## Delayed information only", "", "![delayed fronts](delayed_fronts.png)", "",
+             "The budget fronts of the designs whose links carry information one step per hop, the GRNN's "
+             "information model."
+             + (" The dash-dotted line is the median over instances of SLS on the complete graph at one hop per "
+                "step: with communication as fast as the plant the information is partially nested, so that SLS "
+                "optimum is the best cost any controller, linear or not, reaches with this information on its "
+                "instance (`tests/test_lower_bound.py` checks that none of the delayed designs beats it)."
+                if bounds else " Add SLS on the complete graph (`method = \"sls\"`, `graph = \"complete\"`) to "
+                "draw the bound no delayed controller can beat."), ""]
+    sentences = []
+    for panel in sorted({f.panel for f in fronts}):
+        mine = {f.label: f for f in fronts if f.panel == panel}
+        parts = []
+        for budget in (20, 60, 140):
+            ranked = sorted((f.at(budget)[1], label) for label, f in mine.items() if np.isfinite(f.at(budget)[1]))
+            if not ranked:
+                parts.append(f"no delayed design reaches ≤ {budget} links on half the instances")
+                continue
+            best_cost, best = ranked[0]
+            if len(ranked) == 1:
+                parts.append(f"at ≤ {budget} links only {best} has designs ({_fmt(best_cost)})")
+                continue
+            runner_cost, runner = ranked[1]
+            a, b = _per_instance_best(delayed, panel, best, budget), _per_instance_best(delayed, panel, runner, budget)
+            keys = sorted(a.keys() | b.keys())
+            pair = paired_difference(best, runner, [a.get(k, np.inf) for k in keys], [b.get(k, np.inf) for k in keys])
+            verdict = "interval contains 0: not distinguishable" if pair.inconclusive else "significant"
+            parts.append(f"at ≤ {budget} links {best} ({_fmt(best_cost)}) against {runner} ({_fmt(runner_cost)}): "
+                         f"median paired difference {pair.median:+.4f} [{pair.low:+.4f}, {pair.high:+.4f}], "
+                         f"better on {pair.a_wins} of {pair.instances} instances ({verdict})")
+        bound = f" The SLS bound's median is {_fmt(bounds[panel][0])}." if panel in bounds else ""
+        sentences.append(f"- {panel_title(panel)}: " + "; ".join(parts) + "." + bound)
+    return lines + ["Best delayed design per budget (median best cost within the budget; paired over instances "
+                    "against the next best):", ""] + sentences + [""]
+
+
+def _per_instance_best(records: list[dict], panel: tuple, label: str, budget: float) -> dict:
+    best = {}
+    for r in records:
+        if (r["label"] == label and panel_key(r["instance"]) == panel and r["links"] <= budget
+                and r["status"] in ("optimal", "inaccurate") and np.isfinite(r["cost"])):
+            key = json.dumps(r["instance"], sort_keys=True)
+            best[key] = min(best.get(key, np.inf), r["cost"])
+    return best
+
+
 def _environment_lines(meta: dict) -> list[str]:
     """Where each experiment's runs were computed (recorded by the runner when it computed runs)."""
     rows = [(k.split(":", 1)[1], v) for k, v in sorted(meta.items()) if k.startswith("environment:")]
@@ -601,9 +694,8 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         f"{len(runs)} runs on {len(instances)} instances, {len(records)} designs. "
         "Costs are E[J] / trace(P) over the horizon (centralized LQR = 1); links are directed off-diagonal "
         "communication links (self-loops are local feedback and listed separately). "
-        "Exact closed-form costs for linear controllers; for learned ones a control-variate estimate on the "
-        "validation set, shared by every method on an instance (relative standard error about 0.01 %; "
-        "`runs.csv` has the plain sample mean too)."
+        "Exact closed-form costs for linear controllers; for learned ones an estimate on the validation set, "
+        "shared by every method on an instance" + _precision_text(records) + "."
         + (f" The store also holds {superseded} runs made by code that has changed since; they are not "
            "shown (see Code fingerprints)." if superseded else ""),
         "",
@@ -623,6 +715,7 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         ]
         lines += _budget_tables(records)
     lines += _paired_lines(records, meta)
+    lines += _delayed_section(records, out, files, styles, boundaries)
     lines += [
         "## Cost against links per setting (paper Fig. 3 style)",
         "",

@@ -3,6 +3,7 @@
 Public names::
 
     from compare import load_spec, run_experiment, Store, write_report, methods, method
+    from compare import designs_frame       # Store.records() as one pandas table (the `analysis` extra)
 """
 
 from importlib import import_module
@@ -33,6 +34,9 @@ _EXPORTS = {
     "aggregate": "report",
     "plot_cost_vs_links": "report",
     "write_report": "report",
+    "designs_frame": "export",
+    "write_designs": "export",
+    "MissingExtra": "export",
 }
 
 __all__ = list(_EXPORTS)

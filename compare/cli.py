@@ -1,16 +1,31 @@
-"""The ``compare`` command: run experiments, write reports, list methods and presets."""
+"""The ``compare`` command: run experiments, write reports, export results, list methods and presets.
+
+Importing this module imports click and nothing heavy: each command imports what it
+needs (the method registry pulls in torch and cvxpy, reports matplotlib), so
+``compare --help`` and bad-input errors answer at once.
+"""
 
 from __future__ import annotations
 
 import os
 import sys
+from importlib import resources
 from pathlib import Path
 
 import click
 
-from .spec import SpecError, load_spec, preset_names
-
 __all__ = ["main"]
+
+#: Approximate wall time of ``compare run PRESET`` on 2 cores (2 workers), report included.
+#: A preset missing here is listed as "not measured".
+PRESET_TIMES = {
+    "quick": "~2 min",
+    "baselines-small": "~1 min (estimated from its size, not measured)",
+    "sls-small": "~1 min (estimated from its size, not measured)",
+    "table1-small": "~1-2 min (estimated from table1's per-run times, not measured)",
+    "table1": "~25 min",
+    "tradeoff": "~45 min",
+}
 
 
 class UserError(click.ClickException):
@@ -23,6 +38,21 @@ def _store_path(out: Path, store: str | None) -> Path:
     return Path(store) if store else out / "results.sqlite"
 
 
+def _check_folder(path: Path, option: str = "--out") -> None:
+    """A folder argument must not name an existing file (or sit under one)."""
+    for part in (path, *path.parents):
+        if part.exists():
+            if not part.is_dir():
+                what = "is a file" if part == path else f"is inside {part}, which is a file"
+                raise UserError(f"{option} {path} {what}; give a folder")
+            return
+
+
+def _check_file(path: Path, option: str = "--store") -> None:
+    if path.is_dir():
+        raise UserError(f"{option} {path} is a folder; give the result store file")
+
+
 def _open_store(path: Path):
     from .store import Store, StoreError
 
@@ -30,6 +60,23 @@ def _open_store(path: Path):
         return Store(path)
     except StoreError as exc:
         raise UserError(str(exc)) from None
+    except OSError as exc:
+        raise UserError(f"cannot open the result store {path}: {exc.strerror or exc}") from None
+
+
+def _preset_names() -> list[str]:
+    """The shipped presets, read from the package folder (no spec parsing, no method imports)."""
+    folder = resources.files("compare") / "presets"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+class _RunCommand(click.Command):
+    """``compare run``, whose help ends with the presets and their run times (read when help is shown)."""
+
+    def format_epilog(self, ctx, formatter):
+        rows = [(name, PRESET_TIMES.get(name, "not measured")) for name in _preset_names()]
+        with formatter.section("Presets (approximate run time on 2 cores; `compare presets` describes them)"):
+            formatter.write_dl(rows)
 
 
 def _write_report(store, out: Path) -> dict:
@@ -56,11 +103,11 @@ def main():
     """Compare distributed controller designs on the same cost-versus-links axes."""
 
 
-@main.command()
+@main.command(cls=_RunCommand)
 @click.argument("experiment", default="quick", metavar="[PRESET | FILE]")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
+@click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Report folder (default: reports/<experiment name>). The store lives there too.")
-@click.option("--store", "store_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--store", "store_path", type=click.Path(path_type=Path), default=None, metavar="FILE",
               help="Result store file (default: <out>/results.sqlite).")
 @click.option("--workers", type=int, default=None,
               help="Worker processes (default: number of CPU cores; 1 runs in this process).")
@@ -80,16 +127,22 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
     own runs. Your own methods come in as plug-ins (--plugin, or `plugins` and
     method = "module:function" in the spec); `compare methods --plugin ...` lists them.
     """
+    if workers is not None and workers < 1:
+        raise UserError(f"--workers must be >= 1, got {workers}")
+    if out is not None:
+        _check_folder(out)
+    if store_path is not None:
+        _check_file(store_path)
     from .runner import ExecutorError, StoreBusy, run_experiment
+    from .spec import SpecError, load_spec
 
     try:
         spec = load_spec(experiment, plugins=plugins)
     except SpecError as exc:
         raise UserError(str(exc)) from None
-    if workers is not None and workers < 1:
-        raise UserError(f"--workers must be >= 1, got {workers}")
     workers = workers or os.cpu_count() or 1
     out = out or Path("reports") / spec.name
+    _check_folder(out)
     store = _open_store(_store_path(out, store_path))
     with store:
         try:
@@ -109,12 +162,15 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
 
 
 @main.command()
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("reports/quick"),
+@click.option("--out", type=click.Path(path_type=Path), default=Path("reports/quick"),
               show_default=True, help="Report folder holding the store.")
-@click.option("--store", "store_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--store", "store_path", type=click.Path(path_type=Path), default=None, metavar="FILE",
               help="Result store file (default: <out>/results.sqlite).")
 def report(out, store_path):
     """Regenerate the report from the result store alone."""
+    _check_folder(out)
+    if store_path is not None:
+        _check_file(store_path)
     path = _store_path(out, store_path)
     if not path.is_file():
         raise UserError(f"no result store at {path}; run `compare run` first or pass --store")
@@ -123,6 +179,61 @@ def report(out, store_path):
             raise UserError(f"the store {path} holds no runs")
         files = _write_report(store, out)
     click.echo(f"report: {files['md']}")
+
+
+@main.command("export")
+@click.option("--out", type=click.Path(path_type=Path), required=True,
+              help="Folder to write designs.csv (or designs.parquet) into; created if missing.")
+@click.option("--store", "store_path", type=click.Path(path_type=Path), default=None, metavar="FILE",
+              help="Result store file to read.")
+@click.option("--from", "report_dir", type=click.Path(path_type=Path), default=None, metavar="REPORT_DIR",
+              help="Report folder whose results.sqlite to read (default: the --out folder's).")
+@click.option("--format", "fmt", default="csv", show_default=True, metavar="csv|parquet",
+              help="File format; parquet needs pyarrow.")
+def export(out, store_path, report_dir, fmt):
+    """Write every current design as one table, ready for pandas.
+
+    One row per design: the method, label and instance fields (family, n, a_norm,
+    seed, ...), cost, links and status, one column per hyperparameter (gamma,
+    beta, ...; empty where a method has none) and the scalar extras. The same table
+    is `Store(path).to_pandas()` in Python. Needs the optional extra:
+    pip install -e ".[analysis]".
+    """
+    from .export import FORMATS, MissingExtra, require_pandas
+
+    if fmt not in FORMATS:
+        raise UserError(f"--format: unknown format {fmt!r} (known: {', '.join(FORMATS)})")
+    if store_path is not None and report_dir is not None:
+        raise UserError("give --store FILE or --from REPORT_DIR, not both")
+    _check_folder(out)
+    if report_dir is not None:
+        _check_folder(report_dir, "--from")
+    if store_path is not None:
+        _check_file(store_path)
+        path = store_path
+    else:
+        path = (report_dir if report_dir is not None else out) / "results.sqlite"
+    if not path.is_file():
+        if store_path is not None:
+            raise UserError(f"no result store at {path} (--store)")
+        if report_dir is not None:
+            raise UserError(f"no result store in {report_dir} (--from): {path} does not exist")
+        raise UserError(f"no result store at {path}; name one with --store FILE or --from REPORT_DIR")
+    try:
+        require_pandas(fmt)
+    except MissingExtra as exc:
+        raise UserError(str(exc)) from None
+    from .export import write_designs
+
+    with _open_store(path) as store:
+        if len(store) == 0:
+            raise UserError(f"the store {path} holds no runs")
+        frame = store.to_pandas()
+    try:
+        written = write_designs(frame, out, fmt)
+    except OSError as exc:
+        raise UserError(f"cannot write to {out}: {exc.strerror or exc}") from None
+    click.echo(f"{len(frame)} designs, {frame.shape[1]} columns: {written}")
 
 
 @main.command()
@@ -148,6 +259,8 @@ def methods(plugins):
 @click.argument("name", required=False)
 def presets(name):
     """List the shipped presets, or print one preset's spec."""
+    from .spec import SpecError, load_spec, preset_names
+
     if name:
         try:
             click.echo(load_spec(name).source.rstrip())

@@ -294,10 +294,14 @@ class Store:
         return controller_from_arrays(kind, arrays)
 
     def to_pandas(self):
-        """All records as a pandas DataFrame (pandas must be installed)."""
-        import pandas as pd
+        """Every current design as a pandas DataFrame, one row per design (as ``compare export`` writes).
 
-        records = self.records()
-        for r in records:
-            r.update({f"instance.{k}": v for k, v in r["instance"].items()})
-        return pd.DataFrame.from_records(records)
+        Hyperparameters (``gamma``, ``beta``, ...) and instance fields (``family``,
+        ``n``, ``a_norm``, ``seed``, ...) are columns of their own; see
+        :func:`compare.export.designs_frame` for every column and its type. Needs
+        pandas, from the optional extra: ``pip install -e ".[analysis]"``;
+        without it, raises :class:`compare.export.MissingExtra` (an ImportError).
+        """
+        from .export import designs_frame
+
+        return designs_frame(self.records(), self.members())

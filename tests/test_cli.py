@@ -171,3 +171,21 @@ def test_sigkill_mid_sweep_resumes_to_the_same_store(tmp_path):
     assert len(killed_runs) == 240 and len({k for k, _ in killed_runs}) == 240
     assert killed_runs == clean_runs
     assert killed_designs == clean_designs
+
+
+def test_out_or_store_of_the_wrong_kind_is_one_line_with_exit_code_2(tmp_path):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    spec = str(_write(tmp_path))
+    for args, message in (
+        (["run", spec, "--out", str(a_file)], "is a file"),
+        (["run", spec, "--out", str(a_file / "sub")], "is a file"),
+        (["run", spec, "--out", str(tmp_path / "o"), "--store", str(tmp_path)], "is a folder"),
+        (["report", "--out", str(a_file)], "is a file"),
+        (["report", "--out", str(tmp_path), "--store", str(tmp_path)], "is a folder"),
+    ):
+        result = _cli(*args)
+        assert result.returncode == 2, (args, result.stderr)
+        assert len(result.stderr.strip().splitlines()) == 1 and message in result.stderr, (args, result.stderr)
+        assert "Traceback" not in result.stderr
+    assert a_file.read_text() == "x" and not (tmp_path / "o").exists()

@@ -15,6 +15,8 @@ import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter  # noqa: E402
 
+from .statistics import panel_title  # noqa: E402
+
 __all__ = ["LINESTYLES", "label_styles", "cost_axis", "plot_budget_fronts", "OFF_SCALE", "legend_handles"]
 
 #: Line style per information model.
@@ -146,7 +148,7 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
         ax.set_xlim(-0.4, right * 1.15 + 1)
         ax.set_xlabel("link budget L (directed off-diagonal links)")
         ax.set_ylabel("best cost with ≤ L links (median, 25–75 %)")
-        ax.set_title(_title(panel) + ("\nabove the axis: " + ", ".join(above[panel]) if panel in above else ""),
+        ax.set_title(panel_title(panel) + ("\nabove the axis: " + ", ".join(above[panel]) if panel in above else ""),
                      fontsize=10 if panel in above else None)
         ax.axhline(1.0, color="0.6", linewidth=0.8, zorder=0)
         if bounds and panel in bounds:
@@ -160,7 +162,3 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
     return fig, axes
 
 
-def _title(panel) -> str:
-    from .report import panel_title
-
-    return panel_title(panel)

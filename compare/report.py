@@ -33,7 +33,10 @@ __all__ = [
     "INFO_STYLE",
 ]
 
-from .figures import LINESTYLES, OFF_SCALE  # noqa: E402
+from .figures import (LINESTYLES, OFF_SCALE, _grid, cost_axis, draw_boundary, finish_legend,  # noqa: E402
+                      label_styles, legend_handles, plot_budget_fronts)
+from .statistics import _quantiles, best_tables, budget_fronts, paired_comparisons, paired_difference  # noqa: E402
+from .statistics import panel_key, panel_title  # noqa: E402
 
 #: Line style per information model, so that a zero-delay static gain and a
 #: one-step-delay dynamic controller with the same link count never look alike.
@@ -49,15 +52,6 @@ def quartiles(values) -> tuple[float, float, float]:
         return (float("nan"),) * 3
     q1, med, q3 = np.percentile(finite, [25, 50, 75])
     return float(q1), float(med), float(q3)
-
-
-def panel_key(instance: dict) -> tuple:
-    return (instance.get("family", "?"), instance.get("n", 0), instance.get("a_norm", float("nan")))
-
-
-def panel_title(key: tuple) -> str:
-    family, n, a_norm = key
-    return f"N = {n}, ‖A‖₂ = {a_norm:g}" if np.isfinite(a_norm) else f"{family}, N = {n}"
 
 
 @dataclass(frozen=True)
@@ -215,7 +209,6 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
     """
     from matplotlib.transforms import offset_copy
 
-    from .figures import _grid, cost_axis, draw_boundary, finish_legend, label_styles, legend_handles
 
     panels = sorted({p.panel for p in points})
     labels = list(dict.fromkeys(p.label for p in sorted(points, key=lambda p: p.label)))
@@ -328,11 +321,9 @@ def _summary_tables(points: list[Point]) -> list[str]:
 
 def _budget_tables(records: list[dict], budgets=(20, 60, 140, None)) -> list[str]:
     """The budget fronts at a few budgets, with the number of instances where some design fits."""
-    from .statistics import budget_fronts
-
-    fronts = {(f.panel, f.label): f for f in budget_fronts(records)}
-    table = {key: [(fronts[key].at(np.inf if b is None else b)[1], k) for (_, k), b in zip(cells, budgets)]
-             for key, cells in budget_costs(records, budgets).items()}
+    grid = np.array([np.inf if b is None else b for b in budgets], dtype=float)
+    table = {key: list(zip(_quantiles(best)[1], np.isfinite(best).sum(axis=0)))
+             for key, best in best_tables(records, grid).items() if np.isfinite(best).any()}
     heads = [f"≤ {b} links" if b is not None else "any" for b in budgets]
     lines = []
     for panel in sorted({key[0] for key in table}):
@@ -370,8 +361,6 @@ def _paired_table(comparisons: dict, title: str) -> list[str]:
 
 def _paired_lines(records: list[dict], meta: dict) -> list[str]:
     """GRNN-Sparse against every other method, and the pairs the specs ask for, per budget."""
-    from .statistics import paired_comparisons
-
     labels = {r["label"] for r in records}
     by_method = {r["method"]: r["label"] for r in records}
     lines = []
@@ -434,8 +423,6 @@ def _sls_bounds(records: list[dict]) -> dict:
 
 def _delayed_section(records: list[dict], out: Path, files: dict, styles: dict, boundaries: dict) -> list[str]:
     """Budget fronts of the methods with the delayed information model, the SLS bound, and which wins."""
-    from .figures import plot_budget_fronts
-    from .statistics import budget_fronts, paired_difference
 
     delayed = [r for r in records if r["info_model"] == "delayed"]
     if len({r["label"] for r in delayed}) < 2:
@@ -455,10 +442,12 @@ def _delayed_section(records: list[dict], out: Path, files: dict, styles: dict, 
                 if bounds else " Add SLS on the complete graph (`method = \"sls\"`, `graph = \"complete\"`) to "
                 "draw the bound no delayed controller can beat."), ""]
     sentences = []
+    budgets = (20, 60, 140)
+    tables = best_tables(delayed, budgets)
     for panel in sorted({f.panel for f in fronts}):
         mine = {f.label: f for f in fronts if f.panel == panel}
         parts = []
-        for budget in (20, 60, 140):
+        for k, budget in enumerate(budgets):
             ranked = sorted((f.at(budget)[1], label) for label, f in mine.items() if np.isfinite(f.at(budget)[1]))
             if not ranked:
                 parts.append(f"no delayed design reaches ≤ {budget} links on half the instances")
@@ -468,9 +457,7 @@ def _delayed_section(records: list[dict], out: Path, files: dict, styles: dict, 
                 parts.append(f"at ≤ {budget} links only {best} has designs ({_fmt(best_cost)})")
                 continue
             runner_cost, runner = ranked[1]
-            a, b = _per_instance_best(delayed, panel, best, budget), _per_instance_best(delayed, panel, runner, budget)
-            keys = sorted(a.keys() | b.keys())
-            pair = paired_difference(best, runner, [a.get(k, np.inf) for k in keys], [b.get(k, np.inf) for k in keys])
+            pair = paired_difference(best, runner, tables[(panel, best)][:, k], tables[(panel, runner)][:, k])
             verdict = "interval contains 0: not distinguishable" if pair.inconclusive else "significant"
             parts.append(f"at ≤ {budget} links {best} ({_fmt(best_cost)}) against {runner} ({_fmt(runner_cost)}): "
                          f"median paired difference {pair.median:+.4f} [{pair.low:+.4f}, {pair.high:+.4f}], "
@@ -479,16 +466,6 @@ def _delayed_section(records: list[dict], out: Path, files: dict, styles: dict, 
         sentences.append(f"- {panel_title(panel)}: " + "; ".join(parts) + "." + bound)
     return lines + ["Best delayed design per budget (median best cost within the budget; paired over instances "
                     "against the next best):", ""] + sentences + [""]
-
-
-def _per_instance_best(records: list[dict], panel: tuple, label: str, budget: float) -> dict:
-    best = {}
-    for r in records:
-        if (r["label"] == label and panel_key(r["instance"]) == panel and r["links"] <= budget
-                and r["status"] in ("optimal", "inaccurate") and np.isfinite(r["cost"])):
-            key = json.dumps(r["instance"], sort_keys=True)
-            best[key] = min(best.get(key, np.inf), r["cost"])
-    return best
 
 
 def _environment_lines(meta: dict) -> list[str]:
@@ -666,8 +643,6 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     facts = {k.split(":", 1)[1]: v for k, v in meta.items() if k.startswith("instance:")}
     boundaries = plant_links(records, facts)
     files = {}
-    from .figures import label_styles, plot_budget_fronts
-    from .statistics import budget_fronts
 
     styles = label_styles(sorted({r["label"] for r in records}))
     fronts = budget_fronts(records)

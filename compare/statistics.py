@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-__all__ = ["Front", "budget_fronts", "best_within", "Paired", "paired_difference", "median_interval",
-           "paired_comparisons", "instances_by_panel", "OK_STATUSES"]
+__all__ = ["Front", "budget_fronts", "best_within", "best_tables", "Paired", "paired_difference", "median_interval",
+           "paired_comparisons", "instances_by_panel", "panel_key", "panel_title", "OK_STATUSES"]
 
 OK_STATUSES = ("optimal", "inaccurate")
 # Quantiles of values that may be infinite: replace inf by a huge sentinel, so that a
@@ -29,10 +29,17 @@ OK_STATUSES = ("optimal", "inaccurate")
 _SENTINEL = 1e300
 
 
-def _panel(instance: dict) -> tuple:
-    from .report import panel_key
+def panel_key(instance: dict) -> tuple:
+    """The panel an instance belongs to: (family, n, a_norm)."""
+    return (instance.get("family", "?"), instance.get("n", 0), instance.get("a_norm", float("nan")))
 
-    return panel_key(instance)
+
+def panel_title(key: tuple) -> str:
+    family, n, a_norm = key
+    return f"N = {n}, ‖A‖₂ = {a_norm:g}" if np.isfinite(a_norm) else f"{family}, N = {n}"
+
+
+_panel = panel_key
 
 
 def _ok(record) -> bool:
@@ -90,6 +97,16 @@ def best_within(records, panel_instances: list[str], budgets) -> np.ndarray:
             fits = budgets >= r["links"]
             best[i, fits] = np.minimum(best[i, fits], r["cost"])
     return best
+
+
+def best_tables(records, budgets) -> dict[tuple, np.ndarray]:
+    """(panel, label) -> :func:`best_within` of that label's records; rows are the panel's instances, aligned
+    across labels (:func:`instances_by_panel` order)."""
+    panels = instances_by_panel(records)
+    groups = defaultdict(list)
+    for r in records:
+        groups[(_panel(r["instance"]), r["label"])].append(r)
+    return {key: best_within(rs, panels[key[0]], budgets) for key, rs in sorted(groups.items())}
 
 
 def budget_fronts(records) -> list[Front]:
@@ -164,21 +181,17 @@ def paired_comparisons(records, reference: str, budgets=(20, 60, 140, None), oth
     ``budgets`` None means any number of links. ``others`` restricts the labels
     compared with the reference.
     """
-    panels = instances_by_panel(records)
-    by_label = defaultdict(lambda: defaultdict(list))
-    for r in records:
-        by_label[_panel(r["instance"])][r["label"]].append(r)
     grid = np.array([np.inf if b is None else b for b in budgets], dtype=float)
+    tables = best_tables(records, grid)
     out = {}
-    for panel, labels in sorted(by_label.items()):
-        if reference not in labels:
+    for panel in sorted({p for p, _ in tables}):
+        if (panel, reference) not in tables:
             continue
-        ref = best_within(labels[reference], panels[panel], grid)
+        ref = tables[(panel, reference)]
         rows = []
-        for label in sorted(labels):
-            if label == reference or (others is not None and label not in others):
+        for (pnl, label), other in tables.items():
+            if pnl != panel or label == reference or (others is not None and label not in others):
                 continue
-            other = best_within(labels[label], panels[panel], grid)
             rows += [paired_difference(reference, label, ref[:, k], other[:, k], budgets[k])
                      for k in range(len(budgets))]
         out[panel] = rows

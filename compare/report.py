@@ -458,7 +458,15 @@ def _delayed_section(records: list[dict], out: Path, files: dict, styles: dict, 
                 continue
             runner_cost, runner = ranked[1]
             pair = paired_difference(best, runner, tables[(panel, best)][:, k], tables[(panel, runner)][:, k])
-            verdict = "interval contains 0: not distinguishable" if pair.inconclusive else "significant"
+            if pair.inconclusive:
+                verdict = "interval contains 0: not distinguishable"
+            elif pair.high < 0:
+                verdict = f"{best} significantly better"
+            else:
+                # Medians over instances can rank two methods against their paired difference
+                # when they ran on different instances (e.g. table1's 50 seeds, tradeoff's 30).
+                verdict = (f"{runner} significantly better on the {pair.instances} common instances; the "
+                           "medians rank them otherwise because the two ran on different instances")
             parts.append(f"at ≤ {budget} links {best} ({_fmt(best_cost)}) against {runner} ({_fmt(runner_cost)}): "
                          f"median paired difference {pair.median:+.4f} [{pair.low:+.4f}, {pair.high:+.4f}], "
                          f"better on {pair.a_wins} of {pair.instances} instances ({verdict})")

@@ -160,3 +160,18 @@ method = "autonomous"
             run_experiment(parse_spec(spec.format(name=name, report=report)), store, progress=False)
             _write_report(store, out)
         assert ("## Table 1" in (out / "report.md").read_text()) is expected
+
+
+def test_delayed_section_says_when_the_paired_result_reverses_the_median_ranking(tmp_path):
+    from compare.figures import label_styles
+    from compare.report import _delayed_section
+
+    insts = [dict(INST[0], seed=s) for s in range(8)]
+    records = [_rec(inst, "A", 10, 1.0 if s < 4 else 1.2, info="delayed") for s, inst in enumerate(insts)]
+    # B ran on instances 3..7 only and beats A on each of them by 0.01.
+    records += [_rec(inst, "B", 10, (1.0 if s < 4 else 1.2) - 0.01, info="delayed")
+                for s, inst in enumerate(insts) if s >= 3]
+    lines = _delayed_section(records, tmp_path, {}, label_styles(["A", "B"]), {})
+    text = "\n".join(lines)
+    assert "at ≤ 20 links A (1.1) against B (1.19)" in text
+    assert "B significantly better on the 5 common instances" in text

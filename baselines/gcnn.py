@@ -21,13 +21,15 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from codesign.controllers import register_controller
 from codesign.design import Design, count_links
 from codesign.evaluation import simulate, spectral_radius, validation_set
 from codesign.methods import method
-from codesign.training import DTYPES, BatchedAdam
+from codesign._lazy import lazy_import
+from codesign.training import DTYPES, BatchedAdam, no_grad, torch_dtype
+
+torch = lazy_import("torch")
 
 __all__ = ["gcnn", "gcnn_batch", "GCNNController", "GCNN_TAPS", "GCNN_FEATURES"]
 
@@ -107,7 +109,7 @@ def _init(rng: np.random.Generator, taps: int, features: int):
     return H, w
 
 
-@torch.no_grad()
+@no_grad
 def _rollout_cost(S, H, w, A_t, B_t, P, x0, horizon, trace_P, ws=None):
     J, _ = _forward(S, H, w, A_t, B_t, P, x0, horizon, keep=False, ws=ws)
     return J / x0.shape[1] / trace_P
@@ -279,9 +281,9 @@ def gcnn_batch(jobs, *, stack_size: int = 64) -> list[Design]:
             for j, job in enumerate(parsed)]
 
 
-@torch.no_grad()
+@no_grad
 def _train(members, steps, batch, dtype, curve_every, curve_size):
-    tdt = DTYPES[dtype]
+    tdt = torch_dtype(dtype)
     M = len(members)
     insts = [job.instance for job, _ in members]
     if any(not (np.array_equal(i.Q, np.eye(i.n)) and np.array_equal(i.R, np.eye(i.n))) for i in insts):

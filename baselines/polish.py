@@ -8,7 +8,6 @@ entries of K allowed by a mask with L-BFGS and the exact masked gradient.
 from __future__ import annotations
 
 import numpy as np
-import scipy.optimize
 
 from codesign.evaluation import static_gain_cost_and_grad
 
@@ -66,6 +65,8 @@ def polish_gain(instance, K0, mask=None, *, gtol: float = 1e-9, maxiter: int = 2
     if len(index[0]) == 0:
         cost, _ = static_gain_cost_and_grad(instance, np.zeros_like(K0))
         return PolishResult(np.zeros_like(K0), cost, 0.0, True, "empty pattern", 0)
+    import scipy.optimize  # imported on use, like every heavy package (fast CLI)
+
     res = scipy.optimize.minimize(
         fun,
         K0[index],

@@ -28,9 +28,7 @@ from __future__ import annotations
 import math
 import re
 
-import cvxpy as cp
 import numpy as np
-import scipy.sparse as sp
 
 from codesign.controllers import register_controller
 from codesign.design import INACCURATE_RTOL, Design, count_links, solver_status, vet_solver_cost
@@ -176,6 +174,9 @@ def _psd_sqrt(M: np.ndarray) -> np.ndarray:
 
 def _solve_qp(instance, dist, T, *, speed, act_delay, fir):
     """Build and solve the SLS QP; returns (X, U, info dict) or (None, None, info)."""
+    import cvxpy as cp  # imported on use: cvxpy takes about a second to import
+    import scipy.sparse as sp
+
     n = instance.n
     nn = n * n
     # Column-major vec: entry (i, j) of a map sits at j*n + i and vec(A M) = (I ⊗ A) vec(M).

@@ -61,7 +61,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-import scipy.optimize
 
 from codesign.controllers import register_controller
 from codesign.design import Design, count_links
@@ -356,6 +355,8 @@ def polish_delayed(instance, K_local, K_delayed, free=None, *, gtol: float = _PO
         return cost, np.concatenate([g_local, g_delayed[index]])
 
     theta0 = np.concatenate([k_local, K_delayed[index]])
+    import scipy.optimize  # imported on use, like every heavy package (fast CLI)
+
     res = scipy.optimize.minimize(fun, theta0, jac=True, method="L-BFGS-B",
                                   options={"maxiter": maxiter, "gtol": gtol, "ftol": _POLISH_FTOL,
                                            "maxcor": _MAXCOR})
@@ -394,6 +395,8 @@ def _weighted_l1(instance, k_local, K_delayed, threshold, *, tol, maxiter) -> De
     d = K_delayed[off]
     theta0 = np.concatenate([k_local, np.maximum(d, 0.0), np.maximum(-d, 0.0)])
     bounds = [(None, None)] * n + [(0.0, None)] * (2 * m)
+    import scipy.optimize  # imported on use, like every heavy package (fast CLI)
+
     res = scipy.optimize.minimize(fun, theta0, jac=True, method="L-BFGS-B", bounds=bounds,
                                   options={"maxiter": maxiter, "gtol": tol, "ftol": _L1_FTOL, "maxcor": _MAXCOR})
     k_local, K = unpack(res.x)

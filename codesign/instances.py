@@ -15,10 +15,7 @@ from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
 
-import networkx as nx
 import numpy as np
-import scipy.linalg
-import scipy.stats
 
 __all__ = ["Instance", "InstanceError", "paper_instance", "hop_distances"]
 
@@ -38,6 +35,8 @@ def hop_distances(adj: np.ndarray) -> np.ndarray:
 
     Unreachable pairs get ``np.inf``; the diagonal is 0.
     """
+    import networkx as nx  # imported on use: `compare --help` and `compare methods` must stay fast
+
     adj = np.asarray(adj) != 0
     graph = nx.from_numpy_array(adj.astype(int), create_using=nx.DiGraph)
     graph.remove_edges_from(nx.selfloop_edges(graph))
@@ -226,6 +225,8 @@ def _as_matrix(label: str, value) -> np.ndarray:
 
 def solve_dare(A, B, Q, R) -> np.ndarray:
     """Stabilizing DARE solution, or :class:`InstanceError` if there is none."""
+    import scipy.linalg
+
     try:
         P = scipy.linalg.solve_discrete_are(A, B, Q, R)
     except (np.linalg.LinAlgError, ValueError) as exc:
@@ -287,6 +288,8 @@ def canonical_eigh(M: np.ndarray, *, rng: np.random.Generator | None = None,
             lead = np.argmax(magnitude >= magnitude.max(axis=0) - 1e-9, axis=0)
             block = block * np.sign(block[lead, np.arange(block.shape[1])])
             if rng is not None:
+                import scipy.stats
+
                 block = block @ scipy.stats.ortho_group.rvs(stop - start, random_state=rng)
             V[:, start:stop] = block
             w[start:stop] = w[start:stop].mean()
@@ -336,6 +339,8 @@ def paper_instance(
             raise InstanceError(f"{label} must be a positive finite number, got {value!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise InstanceError(f"seed must be a non-negative integer, got {seed!r}")
+    import networkx as nx
+
     rng = np.random.default_rng(int(seed))
     while True:
         comm = _knn_graph(rng.uniform(0.0, 1.0, n), degree)

@@ -23,11 +23,15 @@ matmul with no transposes): x, u ``(M, N, B)``; Z ``(M, N, B, h)``.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
+
+from ._lazy import lazy_import
+
+torch = lazy_import("torch")
 
 __all__ = [
     "ModelSpec",
@@ -39,9 +43,28 @@ __all__ = [
     "grnn_loss_and_grad",
     "init_fwg",
     "DTYPES",
+    "torch_dtype",
+    "no_grad",
 ]
 
-DTYPES = {"float64": torch.float64, "float32": torch.float32}
+#: Floating-point types the trainers run in, by name.
+DTYPES = ("float32", "float64")
+
+
+def torch_dtype(name: str):
+    """The torch dtype called ``name`` (one of :data:`DTYPES`)."""
+    if name not in DTYPES:
+        raise ValueError(f"dtype must be one of {sorted(DTYPES)}, got {name!r}")
+    return getattr(torch, name)
+
+
+def no_grad(function):
+    """``torch.no_grad()`` as a decorator that does not load torch until the function runs."""
+    @functools.wraps(function)
+    def wrapper(*args, **kwargs):
+        with torch.no_grad():
+            return function(*args, **kwargs)
+    return wrapper
 
 
 def _tanh_(pre: torch.Tensor) -> torch.Tensor:
@@ -366,7 +389,7 @@ def loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon):
     return loss
 
 
-@torch.no_grad()
+@no_grad
 def rollout_cost(prob, S, F, W, G, x0, horizon, ws=None) -> torch.Tensor:
     """Mean normalized cost per model on the initial conditions x0 (M, B, N)."""
     M, Bsz, N = x0.shape
@@ -380,7 +403,7 @@ def _cosine(k: int, steps: int) -> float:
     return 0.5 * (1.0 + math.cos(math.pi * k / steps))
 
 
-@torch.no_grad()
+@no_grad
 def train_stack(
     specs: list[ModelSpec],
     *,
@@ -401,11 +424,9 @@ def train_stack(
     go on. The validation curve (mean normalized cost on ``spec.curve_x0``) is
     recorded every ``curve_every`` updates and after the last one.
     """
-    if dtype not in DTYPES:
-        raise ValueError(f"dtype must be one of {sorted(DTYPES)}, got {dtype!r}")
+    tdt = torch_dtype(dtype)
     if steps < 1 or batch < 1:
         raise ValueError(f"steps and batch must be positive, got steps={steps}, batch={batch}")
-    tdt = DTYPES[dtype]
     M = len(specs)
     if M == 0:
         return []

@@ -4,6 +4,8 @@
 
 with S supported on the communication graph: node i reads its neighbours'
 hidden states once per step, so information travels one hop per time step.
+With ``activation="identity"`` the same parameterization is a linear dynamic
+controller (:class:`LinearGRNNController`) whose cost has a closed form.
 
 Entry points: :func:`grnn` (one instance, one variant) and :func:`grnn_batch`
 (many (instance, settings) jobs trained together as one stack of models by
@@ -19,12 +21,12 @@ import numpy as np
 
 from .controllers import register_controller
 from .design import Design, count_links
-from .evaluation import simulate, spectral_radius, validation_set
+from .evaluation import exact_cost, impulse_responses, simulate, spectral_radius, validation_set
 from .methods import method
-from .training import DTYPES, ModelSpec, init_fwg, train_stack
+from .training import ACTIVATIONS, DTYPES, ModelSpec, init_fwg, train_stack
 
-__all__ = ["GRNNController", "grnn", "grnn_batch", "VARIANTS", "grnn_defaults", "paper_beta",
-           "PAPER_BETA"]
+__all__ = ["GRNNController", "LinearGRNNController", "grnn", "grnn_batch", "VARIANTS", "ACTIVATIONS",
+           "grnn_defaults", "paper_beta", "PAPER_BETA"]
 
 VARIANTS = ("given", "dense", "fixed", "sparse")
 
@@ -105,12 +107,36 @@ class GRNNController:
         return np.vstack([top, bottom])
 
 
+@register_controller("grnn_linear")
+@dataclass(frozen=True, eq=False)
+class LinearGRNNController(GRNNController):
+    """A GRNN with the identity activation: Z(t+1) = S Z(t) W + x(t) F, u(t) = Z(t+1) G.
+
+    A linear dynamic controller that relays information one hop per step, so its
+    cost has a closed form (:meth:`closed_loop_responses`, scored by
+    :func:`codesign.exact_cost`) and :meth:`linearized_closed_loop` is its exact
+    closed loop.
+    """
+
+    def step(self, state, x):
+        n, batch, h = state.shape
+        SZW = (self.S @ (state.reshape(n * batch, h) @ self.W).reshape(n, batch * h)).reshape(n, batch, h)
+        Z = SZW + x.T[:, :, None] * self.F
+        return (Z @ self.G).T, Z
+
+    def closed_loop_responses(self, instance, steps: int | None = None):
+        """Maps ``(phi_x, phi_u)`` of this controller in closed loop with the instance (by :meth:`step`)."""
+        if instance.n != self.S.shape[0]:
+            raise ValueError(f"controller has n = {self.S.shape[0]}, instance has n = {instance.n}")
+        return impulse_responses(instance, self, steps)
+
+
 def grnn_defaults() -> dict:
     """The paper code's training settings (docs/methods.md), by name."""
     return dict(
         steps=750, batch=20, hidden=5, lr=0.02, l1_lr=0.03, clip=10.0, frob=2.0,
         ensemble=2, refine_ensemble=1, threshold=4e-3, curve_every=10, curve_size=100,
-        dtype="float64", stability_steps=500, stability_size=100,
+        dtype="float64", stability_steps=500, stability_size=100, activation="tanh",
     )
 
 
@@ -149,6 +175,8 @@ def _check_job(instance, variant, beta, seed, settings) -> dict:
         raise ValueError(f"curve_size must be at least 2, got {s['curve_size']}")
     if s["dtype"] not in DTYPES:
         raise ValueError(f"dtype must be one of {sorted(DTYPES)}, got {s['dtype']!r}")
+    if s["activation"] not in ACTIVATIONS:
+        raise ValueError(f"activation must be one of {ACTIVATIONS}, got {s['activation']!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     return s
@@ -239,15 +267,16 @@ def _train_groups(specs_by_job: list[list[ModelSpec]], jobs: list[_Job], stack_s
     for j, (job, specs) in enumerate(zip(jobs, specs_by_job)):
         s = job.settings
         key = (s["steps"], s["batch"], job.instance.horizon, s["clip"], s["curve_every"], s["dtype"],
-               s["hidden"], s["curve_size"], job.instance.n)
+               s["activation"], s["hidden"], s["curve_size"], job.instance.n)
         groups.setdefault(key, []).extend((j, k) for k in range(len(specs)))
     for key, members in groups.items():
-        steps, batch, horizon, clip, curve_every, dtype = key[:6]
+        steps, batch, horizon, clip, curve_every, dtype, activation = key[:7]
         for start in range(0, len(members), stack_size):
             chunk = members[start:start + stack_size]
             t0 = time.perf_counter()
             out = train_stack([specs_by_job[j][k] for j, k in chunk], steps=steps, batch=batch,
-                              horizon=horizon, clip=clip, curve_every=curve_every, dtype=dtype)
+                              horizon=horizon, clip=clip, curve_every=curve_every, dtype=dtype,
+                              activation=activation)
             share = (time.perf_counter() - t0) / len(chunk)
             for (j, k), result in zip(chunk, out):
                 results[j][k] = result
@@ -335,10 +364,13 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
             return Design.failure(method, job.params, "diverged", "every refinement run diverged",
                                   info_model="delayed", seconds=seconds, extras=extras)
         result = refined[best]
-    controller = GRNNController(result.S, result.F, result.W, result.G)
+    linear = job.settings["activation"] == "identity"
+    controller = (LinearGRNNController if linear else GRNNController)(result.S, result.F, result.W, result.G)
     links, self_loops = count_links(controller.S)
     extras["curve"] = _curve(result)
     extras["spectral_radius"] = spectral_radius(controller.linearized_closed_loop(job.instance))
+    if linear:
+        return _finish_linear(job, controller, first, links, self_loops, seconds, extras)
     rollout = simulate(job.instance, controller)
     extras.update(rollout.summary())
     steps = int(job.settings["stability_steps"])
@@ -373,11 +405,28 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
     )
 
 
+def _finish_linear(job: _Job, controller, first, links, self_loops, seconds, extras) -> Design:
+    """A linear GRNN scored exactly; stable in the long run iff its closed loop's spectral radius is < 1."""
+    method = "grnn" if job.variant == "given" else f"grnn_{job.variant}"
+    cost = exact_cost(job.instance, controller)
+    extras["bounded"] = bool(extras["spectral_radius"] < 1.0)
+    if not np.isfinite(cost):
+        return Design.failure(method, job.params, "diverged", "the trained linear GRNN's exact cost is not finite",
+                              info_model="delayed", seconds=seconds, links=links, self_loops=self_loops,
+                              extras=extras)
+    diverged = extras["diverged_members"]
+    return Design(method=method, params=job.params, controller=controller, cost=cost, links=links,
+                  self_loops=self_loops, info_model="delayed", status="optimal",
+                  message=f"{diverged} of {len(first)} ensemble members diverged" if diverged else "",
+                  seconds=seconds, cost_stderr=0.0, cost_kind="exact", extras=extras)
+
+
 def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: int = 0,
          steps: int = 750, batch: int = 20, hidden: int = 5, lr: float = 0.02, l1_lr: float = 0.03,
          clip: float = 10.0, frob: float = 2.0, ensemble: int = 2, refine_ensemble: int = 1,
          threshold: float = 4e-3, curve_every: int = 10, curve_size: int = 100,
-         dtype: str = "float64", stability_steps: int = 500, stability_size: int = 100) -> Design:
+         dtype: str = "float64", stability_steps: int = 500, stability_size: int = 100,
+         activation: str = "tanh") -> Design:
     """Train a GRNN distributed controller on ``instance`` (paper Sec. III).
 
     Parameters
@@ -413,6 +462,11 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
     stability_steps, stability_size : int
         Length of the boundedness check rollout (0 skips it) and how many draws
         of the validation set it starts from.
+    activation : {"tanh", "identity"}
+        σ in Z(t+1) = σ(S Z(t) W + x(t) F): the paper's tanh, or the identity (the
+        linear GRNN: a linear dynamic controller with the same parameterization,
+        information model and training, scored exactly with ``cost_kind="exact"``;
+        ``bounded`` is then whether its closed loop's spectral radius is below 1).
 
     Returns
     -------
@@ -428,7 +482,7 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
     settings = dict(steps=steps, batch=batch, hidden=hidden, lr=lr, l1_lr=l1_lr, clip=clip, frob=frob,
                     ensemble=ensemble, refine_ensemble=refine_ensemble, threshold=threshold,
                     curve_every=curve_every, curve_size=curve_size, dtype=dtype,
-                    stability_steps=stability_steps, stability_size=stability_size)
+                    stability_steps=stability_steps, stability_size=stability_size, activation=activation)
     return grnn_batch([(instance, {"variant": variant, "beta": beta, "seed": seed, **settings})])[0]
 
 

@@ -10,7 +10,10 @@ parameters as M separate runs with the same seeds.
 
 The gradient is a hand-written backward pass through time (BPTT) of
 
-    Z(t+1) = tanh(S Z(t) W + x(t) F),  u(t) = Z(t+1) G,  x(t+1) = A x(t) + B u(t),
+    Z(t+1) = σ(S Z(t) W + x(t) F),  u(t) = Z(t+1) G,  x(t+1) = A x(t) + B u(t),
+
+with σ = tanh (the paper's GRNN) or the identity (the linear GRNN, see
+:data:`ACTIVATIONS`; one activation per stack),
 
 checked against autograd in the tests (:func:`loss_autograd`). Doing it by hand
 avoids autograd's graph bookkeeping and lets tanh be evaluated as
@@ -43,12 +46,20 @@ __all__ = [
     "grnn_loss_and_grad",
     "init_fwg",
     "DTYPES",
+    "ACTIVATIONS",
     "torch_dtype",
     "no_grad",
 ]
 
 #: Floating-point types the trainers run in, by name.
 DTYPES = ("float32", "float64")
+#: The GRNN's activation σ: the paper's tanh, or the identity (a linear dynamic controller).
+ACTIVATIONS = ("tanh", "identity")
+
+
+def _check_activation(activation: str) -> None:
+    if activation not in ACTIVATIONS:
+        raise ValueError(f"activation must be one of {ACTIVATIONS}, got {activation!r}")
 
 
 def torch_dtype(name: str):
@@ -177,9 +188,16 @@ class BatchedAdam:
 
 
 def clip_coefficients(grads, max_norm: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per-model total gradient norm and torch's clip_grad_norm_ coefficient."""
-    sq = sum(g.reshape(g.shape[0], -1).pow(2).sum(1) for g in grads)
-    norm = sq.sqrt()
+    """Per-model total gradient norm and torch's clip_grad_norm_ coefficient.
+
+    The norm is taken of the gradients scaled by their largest entry, so that it
+    stays finite in float32 for gradients up to ~1e38 (a linear GRNN's first
+    steps on an unstable plant reach 1e22, whose square overflows).
+    """
+    flat = [g.reshape(g.shape[0], -1) for g in grads]
+    scale = torch.stack([f.abs().amax(1) for f in flat]).amax(0)
+    safe = torch.where(scale > 0, scale, torch.ones_like(scale)).unsqueeze(1)
+    norm = sum((f / safe).pow(2).sum(1) for f in flat).sqrt() * safe.squeeze(1)
     coef = (max_norm / (norm + 1e-6)).clamp(max=1.0)
     return norm, coef
 
@@ -230,7 +248,7 @@ class _Workspace:
             )
 
 
-def _forward(prob, S, F, W, G, x0, horizon: int, ws: _Workspace) -> torch.Tensor:
+def _forward(prob, S, F, W, G, x0, horizon: int, ws: _Workspace, activation: str = "tanh") -> torch.Tensor:
     """Roll the stack out from x0 (M, B, N) into the workspace; J (M,) summed over the batch.
 
     Node signals are row vectors here (nodes on the last axis), so ``S Z`` is
@@ -245,6 +263,7 @@ def _forward(prob, S, F, W, G, x0, horizon: int, ws: _Workspace) -> torch.Tensor
     Wt = W.transpose(1, 2)
     St = S.transpose(1, 2)
     X, U, J = ws.X, ws.U, ws.J
+    squash = activation == "tanh"
     X[0].copy_(x0)
     J.zero_()
     for t in range(horizon):
@@ -259,7 +278,8 @@ def _forward(prob, S, F, W, G, x0, horizon: int, ws: _Workspace) -> torch.Tensor
             torch.bmm(Wt, Zprev.view(M, h, BN), out=Y.view(M, h, BN))  # (Z W) on features
             torch.bmm(Y.view(M, hB, N), St, out=Z.view(M, hB, N))  # S (.) on nodes
             Z.addcmul_(x.unsqueeze(1), Fb)
-        _tanh_(Z)
+        if squash:
+            _tanh_(Z)
         u = U[t]
         torch.bmm(Gr, Z.view(M, h, BN), out=u.view(M, 1, BN))
         torch.bmm(x, prob.At, out=X[t + 1])
@@ -286,7 +306,7 @@ def _norm(p):
     return p.reshape(p.shape[0], -1).norm(dim=1)
 
 
-def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None):
+def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None, activation="tanh"):
     """Per-model loss and its gradient with respect to (S, F, W, G), by hand-written BPTT.
 
     Parameters
@@ -302,6 +322,7 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None)
         l1 weights on S.
     ws : _Workspace, optional
         Reusable buffers (made here if not given).
+    activation : {"tanh", "identity"}
 
     Returns
     -------
@@ -315,7 +336,9 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None)
     if ws is None:
         ws = _Workspace(M, N, Bsz, h, horizon, S.dtype, keep=True)
     BN, hB = Bsz * N, h * Bsz
-    J = _forward(prob, S, F, W, G, x0, horizon, ws)
+    _check_activation(activation)
+    squash = activation == "tanh"
+    J = _forward(prob, S, F, W, G, x0, horizon, ws, activation)
     X, U, Zs, Ys = ws.X, ws.U, ws.Zs, ws.Ys
     QX = X if prob.Q_identity else ws.QX
     RU = U if prob.R_identity else ws.RU
@@ -339,8 +362,11 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None)
         else:
             torch.baddbmm(dZ.view(M, h, BN), Gc, du.view(M, 1, BN), out=dZn.view(M, h, BN))
         dG.baddbmm_(du.view(M, 1, BN), Zn.view(M, h, BN).transpose(1, 2))
-        torch.mul(dZn, Zn, out=tmp)
-        torch.addcmul(dZn, tmp, Zn, value=-1.0, out=dPre)  # dZn * (1 - Zn^2)
+        if squash:
+            torch.mul(dZn, Zn, out=tmp)
+            torch.addcmul(dZn, tmp, Zn, value=-1.0, out=dPre)  # dZn * (1 - Zn^2)
+        else:
+            dPre.copy_(dZn)
         dF.baddbmm_(X[t].view(M, 1, BN), dPre_h.transpose(1, 2))
         if t == 0:
             break
@@ -366,7 +392,7 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None)
     return loss, grads
 
 
-def loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon):
+def loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon, activation="tanh"):
     """The same per-model loss with torch.tanh, node-major and autograd-friendly (test reference).
 
     ``x0`` has shape (M, B, N) as in :func:`grnn_loss_and_grad`.
@@ -376,9 +402,11 @@ def loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon):
     h = F.shape[1]
     Z = torch.zeros(M, N, Bsz, h, dtype=x0.dtype)
     J = torch.zeros(M, dtype=x0.dtype)
+    _check_activation(activation)
+    sigma = torch.tanh if activation == "tanh" else (lambda pre: pre)
     for _ in range(horizon):
         SZ = torch.einsum("mij,mjbk->mibk", S, Z)
-        Z = torch.tanh(torch.einsum("mibk,mkl->mibl", SZ, W) + x.unsqueeze(-1) * F.view(M, 1, 1, h))
+        Z = sigma(torch.einsum("mibk,mkl->mibl", SZ, W) + x.unsqueeze(-1) * F.view(M, 1, 1, h))
         u = torch.einsum("mibk,mk->mib", Z, G)
         J = J + torch.einsum("mib,mij,mjb->m", x, prob.Q, x) + torch.einsum("mib,mij,mjb->m", u, prob.R, u)
         x = torch.einsum("mij,mjb->mib", prob.A, x) + torch.einsum("mij,mjb->mib", prob.B, u)
@@ -390,12 +418,12 @@ def loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon):
 
 
 @no_grad
-def rollout_cost(prob, S, F, W, G, x0, horizon, ws=None) -> torch.Tensor:
+def rollout_cost(prob, S, F, W, G, x0, horizon, ws=None, activation="tanh") -> torch.Tensor:
     """Mean normalized cost per model on the initial conditions x0 (M, B, N)."""
     M, Bsz, N = x0.shape
     if ws is None:
         ws = _Workspace(M, N, Bsz, F.shape[1], horizon, S.dtype, keep=False)
-    J = _forward(prob, S, F, W, G, x0, horizon, ws)
+    J = _forward(prob, S, F, W, G, x0, horizon, ws, activation)
     return J / Bsz / prob.trace_P
 
 
@@ -413,6 +441,7 @@ def train_stack(
     clip: float = 10.0,
     curve_every: int = 10,
     dtype: str = "float64",
+    activation: str = "tanh",
 ) -> list[TrainResult]:
     """Train the models of ``specs`` together; one :class:`TrainResult` per spec.
 
@@ -422,9 +451,11 @@ def train_stack(
     clipping at ``clip`` (``None`` or 0 disables it). A model whose loss or
     gradient stops being finite is frozen and reported ``diverged``; the others
     go on. The validation curve (mean normalized cost on ``spec.curve_x0``) is
-    recorded every ``curve_every`` updates and after the last one.
+    recorded every ``curve_every`` updates and after the last one. Every model of
+    the stack uses the same ``activation`` (one of :data:`ACTIVATIONS`).
     """
     tdt = torch_dtype(dtype)
+    _check_activation(activation)
     if steps < 1 or batch < 1:
         raise ValueError(f"steps and batch must be positive, got steps={steps}, batch={batch}")
     M = len(specs)
@@ -461,7 +492,7 @@ def train_stack(
 
     def record(k):
         curve_steps.append(k)
-        curve_costs.append(rollout_cost(prob, S, F, W, G, curve_x0, horizon, ws_curve))
+        curve_costs.append(rollout_cost(prob, S, F, W, G, curve_x0, horizon, ws_curve, activation))
 
     for k in range(steps):
         if curve_every and k % curve_every == 0:
@@ -469,7 +500,8 @@ def train_stack(
         x0 = torch.tensor(np.stack([rng.standard_normal((batch, N)) for rng in rngs]), dtype=tdt)
         x0.mul_(alive.view(M, 1, 1).to(tdt))
         loss, grads = grnn_loss_and_grad(
-            prob, S, F, W, G, x0, penalty=penalty, beta=beta, horizon=horizon, ws=ws_train
+            prob, S, F, W, G, x0, penalty=penalty, beta=beta, horizon=horizon, ws=ws_train,
+            activation=activation,
         )
         grads[0].mul_(maskf)
         norm, coef = clip_coefficients(grads, clip if clip else float("inf"))

@@ -28,6 +28,11 @@ PRESET_TIMES = {
 }
 
 
+#: Where `compare run` writes when no --out is given: untracked, so running leaves a checkout clean.
+#: The reports shipped with the repository are regenerated explicitly with --out reports/<name>.
+RESULTS = Path("results")
+
+
 class UserError(click.ClickException):
     """Bad input: a one-line message and exit code 2, no traceback."""
 
@@ -106,7 +111,8 @@ def main():
 @main.command(cls=_RunCommand)
 @click.argument("experiment", default="quick", metavar="[PRESET | FILE]")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
-              help="Report folder (default: reports/<experiment name>). The store lives there too.")
+              help="Report folder (default: results/<experiment name>, which git ignores). "
+                   "The store lives there too.")
 @click.option("--store", "store_path", type=click.Path(path_type=Path), default=None, metavar="FILE",
               help="Result store file (default: <out>/results.sqlite).")
 @click.option("--workers", type=int, default=None,
@@ -141,7 +147,7 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
     except SpecError as exc:
         raise UserError(str(exc)) from None
     workers = workers or os.cpu_count() or 1
-    out = out or Path("reports") / spec.name
+    out = out or RESULTS / spec.name
     _check_folder(out)
     store = _open_store(_store_path(out, store_path))
     with store:
@@ -155,14 +161,14 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
                        "run the same command again to resume.", err=True)
             sys.exit(130)
         click.echo(str(summary))
-        command = f"compare run {experiment}" + (f" --out {out}" if out != Path("reports") / spec.name else "")
+        command = f"compare run {experiment}" + (f" --out {out}" if out != RESULTS / spec.name else "")
         store.set_meta(f"command:{spec.name}", command)
         files = _write_report(store, out)
     click.echo(f"report: {files['md']}")
 
 
 @main.command()
-@click.option("--out", type=click.Path(path_type=Path), default=Path("reports/quick"),
+@click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "quick",
               show_default=True, help="Report folder holding the store.")
 @click.option("--store", "store_path", type=click.Path(path_type=Path), default=None, metavar="FILE",
               help="Result store file (default: <out>/results.sqlite).")

@@ -159,7 +159,8 @@ def table1_markdown(records) -> str:
             stat = float(statistic(costs)) if costs.size else float("nan")
             low, high = bootstrap_interval(costs, statistic)
             interval = f"[{_fmt(low)}, {_fmt(high)}]" if np.isfinite(low) else "–"
-            paper = PAPER_TABLE1.get(method, {}).get(a)
+            linear = any(r.get("params", {}).get("activation") == "identity" for r in rows)
+            paper = None if linear else PAPER_TABLE1.get(method, {}).get(a)
             gap = f"{100 * (stat / paper - 1):+.1f} %" if paper and np.isfinite(stat) else "–"
             if paper and np.isfinite(low) and not low <= paper <= high:
                 outside.append((method, label, a, stat, paper, low, high))
@@ -169,7 +170,7 @@ def table1_markdown(records) -> str:
                 link_cell = f"{links.mean():.1f} ({(links + loops).mean():.1f})"
             else:
                 link_cell = "–"
-            if method == "grnn_sparse" and a in PAPER_SPARSE_EDGES and links.size:
+            if method == "grnn_sparse" and not linear and a in PAPER_SPARSE_EDGES and links.size:
                 edges = PAPER_SPARSE_EDGES[a]
                 e_low, e_high = bootstrap_interval(links + loops, np.mean)
                 link_cell += f" [{_fmt(e_low, 1)}, {_fmt(e_high, 1)}]; paper ({edges:.1f})"

@@ -364,7 +364,9 @@ def _paired_lines(records: list[dict], meta: dict) -> list[str]:
     labels = {r["label"] for r in records}
     by_method = {r["method"]: r["label"] for r in records}
     lines = []
-    reference = by_method.get("grnn_sparse")
+    # The paper's GRNN-Sparse (tanh), not the linear ablation that shares its method name.
+    reference = next((r["label"] for r in records if r["method"] == "grnn_sparse"
+                      and r["params"].get("activation", "tanh") == "tanh"), None)
     if reference:
         lines += _paired_table(paired_comparisons(records, reference), f"{reference} against every method")
     asked = []

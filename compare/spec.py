@@ -6,6 +6,8 @@ their hyperparameters and grids, and evaluation settings. It expands into
 
     name = "quick"
     description = "..."
+    plugins = ["my_methods", "more_methods.py"]   # optional: modules registering methods (top level,
+                                                  # before any [table], or TOML reads it as a table key)
 
     [instances]
     family = "paper"
@@ -13,14 +15,12 @@ their hyperparameters and grids, and evaluation settings. It expands into
     a_norms = [0.995, 1.05]
     seeds = 10                   # seeds 0..9, or an explicit list [0, 4, 7]
 
-    plugins = ["my_methods", "more_methods.py"]   # optional: modules registering methods
-
     [report]
     sections = ["table1", "training_curves"]       # optional report sections this experiment asks for
     pairs = [["GRNN-Sparse", "Sparse l1 ADMM"]]     # optional paired comparisons (labels or method names)
 
     [evaluation]
-    validation_size = 1000
+    validation_size = 2000       # the default: codesign.evaluation.VALIDATION_SIZE
     noise_std = 0.0
 
     [[methods]]
@@ -148,7 +148,9 @@ class EvaluationSpec:
     ``validation_size`` draws otherwise), stored in its extras as ``noise_cost``.
     """
 
-    validation_size: int = 1000
+    # codesign.evaluation.VALIDATION_SIZE (not imported: the CLI stays light), the draws the
+    # GRNN and GCNN score themselves on, so the harness needs no second rollout.
+    validation_size: int = 2000
     noise_std: float = 0.0
 
 
@@ -348,9 +350,9 @@ def _parse_instances(table: dict) -> InstanceSpec:
         raise SpecError(f"instances.n: sizes must be >= 2, got {list(spec.n)}")
     if any(spec.degree > n for n in spec.n):
         raise SpecError(f"instances.degree: {spec.degree} exceeds n = {min(spec.n)}")
-    for key in ("degree", "horizon"):
-        if getattr(spec, key) < 1:
-            raise SpecError(f"instances.{key}: must be >= 1, got {getattr(spec, key)}")
+    for key, low in (("degree", 2), ("horizon", 1)):  # paper_instance's own limits
+        if getattr(spec, key) < low:
+            raise SpecError(f"instances.{key}: must be >= {low}, got {getattr(spec, key)}")
     if spec.hops < 0:
         raise SpecError(f"instances.hops: must be >= 0, got {spec.hops}")
     if spec.b_norm <= 0:
@@ -360,7 +362,7 @@ def _parse_instances(table: dict) -> InstanceSpec:
 
 def _parse_evaluation(table: dict) -> EvaluationSpec:
     _check_keys("evaluation", table, {"validation_size", "noise_std"})
-    size = _typed("evaluation.validation_size", table.get("validation_size", 1000), int)
+    size = _typed("evaluation.validation_size", table.get("validation_size", EvaluationSpec.validation_size), int)
     noise = _typed("evaluation.noise_std", table.get("noise_std", 0.0), float)
     if size < 2:
         raise SpecError(f"evaluation.validation_size: must be >= 2, got {size}")

@@ -56,6 +56,20 @@ def test_run_then_rerun_and_report(tmp_path):
     assert len((out / "runs.csv").read_text().splitlines()) == 13
 
 
+def test_default_output_is_the_untracked_results_folder(tmp_path, monkeypatch):
+    """Without --out, `compare run` writes results/<name> (git-ignored), never the shipped reports/."""
+    spec = _write(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(main, ["run", str(spec), "--workers", "1", "--no-progress"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "results" / "tiny" / "report.md").is_file()
+    assert not (tmp_path / "reports").exists()
+    again = CliRunner().invoke(main, ["report", "--out", "results/tiny"])
+    assert again.exit_code == 0, again.output
+    root = Path(__file__).resolve().parents[1]
+    assert "/results/" in (root / ".gitignore").read_text().split()
+
+
 def test_parallel_workers_give_the_same_numbers(tmp_path):
     spec = _write(tmp_path)
     runner = CliRunner()

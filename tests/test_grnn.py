@@ -6,10 +6,19 @@ import numpy as np
 import pytest
 import torch
 
-from codesign import Instance, controller_from_arrays, grnn, grnn_batch, paper_instance, simulate
-from codesign.grnn import GRNNController, _selection_set
+from codesign import (
+    Instance,
+    compare_exact_and_simulated,
+    controller_from_arrays,
+    grnn,
+    grnn_batch,
+    paper_instance,
+    simulate,
+)
+from codesign.grnn import GRNNController, LinearGRNNController, _selection_set
 from codesign.training import (
     ModelSpec,
+    clip_coefficients,
     _Problem,
     grnn_loss_and_grad,
     init_fwg,
@@ -38,7 +47,8 @@ def _spec(instance, m, *, mask=None, S0=None, lr=0.02, beta=0.0, penalty=(2.0, 2
     )
 
 
-def test_hand_written_bptt_matches_autograd(inst, unstable):
+@pytest.mark.parametrize("activation", ["tanh", "identity"])
+def test_hand_written_bptt_matches_autograd(inst, unstable, activation):
     """Loss and all four gradients of the hand-written BPTT equal autograd's, with a general Q, R."""
     rng = np.random.default_rng(0)
     Q = np.diag(rng.uniform(0.5, 2.0, inst.n))
@@ -51,9 +61,11 @@ def test_hand_written_bptt_matches_autograd(inst, unstable):
     penalty = torch.tensor([s.penalty for s in specs])
     beta = torch.tensor([s.beta for s in specs])
     leaves = [t.clone().requires_grad_(True) for t in tensors]
-    reference = loss_autograd(prob, *leaves, x0, penalty=penalty, beta=beta, horizon=inst.horizon)
+    reference = loss_autograd(prob, *leaves, x0, penalty=penalty, beta=beta, horizon=inst.horizon,
+                              activation=activation)
     reference.sum().backward()
-    loss, grads = grnn_loss_and_grad(prob, *tensors, x0, penalty=penalty, beta=beta, horizon=inst.horizon)
+    loss, grads = grnn_loss_and_grad(prob, *tensors, x0, penalty=penalty, beta=beta, horizon=inst.horizon,
+                                     activation=activation)
     np.testing.assert_allclose(loss.numpy(), reference.detach().numpy(), rtol=1e-12)
     for leaf, grad in zip(leaves, grads):
         scale = leaf.grad.abs().max().item()
@@ -210,3 +222,67 @@ def test_float32_reaches_the_float64_median_cost():
         designs = grnn_batch([(i, {"variant": "given", "dtype": dtype, "ensemble": 1}) for i in instances])
         costs[dtype] = np.median([d.cost for d in designs])
     assert abs(costs["float32"] / costs["float64"] - 1) < 0.01, costs
+
+
+def _augmented_cost(instance, controller) -> float:
+    """Finite-horizon cost of a linear GRNN by covariance propagation of its closed loop on (x, vec Z)."""
+    n, h = instance.n, controller.hidden
+    Acl = controller.linearized_closed_loop(instance)  # exact for the identity activation
+    # u(t) = G Z(t+1) = Gm (Kzx x(t) + Kzz z(t)): the bottom block row of Acl, read out by Gm.
+    Gm = np.kron(np.eye(n), controller.G.reshape(1, h))
+    K = Gm @ Acl[n:]
+    Sigma = np.zeros((n + n * h, n + n * h))
+    Sigma[:n, :n] = np.eye(n)
+    total = 0.0
+    for _ in range(instance.horizon):
+        total += np.trace(instance.Q @ Sigma[:n, :n]) + np.trace(instance.R @ K @ Sigma @ K.T)
+        Sigma = Acl @ Sigma @ Acl.T
+    total += np.trace(instance.P @ Sigma[:n, :n])
+    return total / instance.trace_P
+
+
+@pytest.mark.parametrize("variant,beta", [("given", None), ("sparse", 0.5)])
+def test_linear_grnn_is_scored_exactly(unstable, variant, beta):
+    """The identity activation gives a linear controller: exact cost, equal to an independent closed form."""
+    design = grnn(unstable, variant=variant, beta=beta, activation="identity", steps=40, ensemble=1,
+                  stability_steps=0)
+    assert design.status == "optimal", design.message
+    assert isinstance(design.controller, LinearGRNNController)
+    assert design.cost_kind == "exact" and design.cost_stderr == 0.0
+    assert design.params["activation"] == "identity"
+    np.testing.assert_allclose(design.cost, _augmented_cost(unstable, design.controller), rtol=1e-9)
+    # The rollout simulator agrees: plain mean within 3 standard errors, control variates to rounding.
+    check = compare_exact_and_simulated(unstable, design.controller)
+    assert abs(check["z"]) < 3
+    np.testing.assert_allclose(check["control_variate"], design.cost, rtol=1e-9)
+    stored = controller_from_arrays(design.controller.kind, design.controller.arrays())
+    assert isinstance(stored, LinearGRNNController)
+    assert design.extras["bounded"] == (design.extras["spectral_radius"] < 1)
+
+
+def test_linear_grnn_differs_from_the_tanh_grnn_only_by_the_activation(inst):
+    """Same seeds, same initial parameters: the first curve point differs (σ differs), the links match the given graph."""
+    kwargs = dict(steps=5, ensemble=1, curve_every=1, stability_steps=0)
+    tanh, linear = grnn(inst, **kwargs), grnn(inst, activation="identity", **kwargs)
+    assert tanh.links == linear.links
+    assert tanh.extras["curve"]["cost"][0] != linear.extras["curve"]["cost"][0]
+    x = np.random.default_rng(0).standard_normal((3, inst.n))
+    ctrl = linear.controller
+    state = ctrl.reset(3)
+    _, Z = ctrl.step(state, x)
+    np.testing.assert_allclose(Z, x.T[:, :, None] * ctrl.F)  # Z(1) = x(0) F with no squashing
+
+
+def test_gradient_norm_is_finite_for_huge_float32_gradients():
+    """A linear GRNN on an unstable plant starts with gradients ~1e22 whose squares overflow float32."""
+    grads = [torch.full((2, 3, 3), 1e22, dtype=torch.float32), torch.full((2, 4), -1e22, dtype=torch.float32)]
+    grads[0][1] = 0.0
+    grads[1][1] = 0.0
+    norm, coef = clip_coefficients(grads, 10.0)
+    np.testing.assert_allclose(norm.numpy(), [1e22 * np.sqrt(13), 0.0], rtol=1e-6)
+    np.testing.assert_allclose(coef.numpy(), [10.0 / (1e22 * np.sqrt(13)), 1.0], rtol=1e-5)
+
+
+def test_unknown_activation_is_a_clear_error(inst):
+    with pytest.raises(ValueError, match="activation must be one of"):
+        grnn(inst, activation="relu", steps=1)

@@ -87,3 +87,18 @@ def test_unknown_preset_and_missing_file(tmp_path):
         load_spec("nope")
     with pytest.raises(SpecError, match="spec file not found"):
         load_spec(tmp_path / "missing.toml")
+
+
+def test_default_validation_size_is_the_evaluators():
+    """The harness scores on the draws the GRNN and GCNN already scored themselves on (no second rollout)."""
+    from codesign.evaluation import VALIDATION_SIZE
+    from compare.spec import EvaluationSpec
+
+    assert EvaluationSpec().validation_size == VALIDATION_SIZE
+
+
+def test_degree_one_is_rejected_at_parse_time():
+    text = ('name = "x"\n[instances]\nfamily = "paper"\nn = [6]\ndegree = 1\nseeds = 1\n'
+            '[[methods]]\nmethod = "lqr"\n')
+    with pytest.raises(SpecError, match="instances.degree: must be >= 2"):
+        parse_spec(text)

@@ -71,8 +71,8 @@ def topology_path_records(records: list[dict], *, method: str = "grnn_sparse", w
     A path is one instance and one setting of every other hyperparameter (a
     Table 1 run at β = 1 with 750 training steps is not on the trade-off
     sweep's 150-step path). Picks a path on ``a_norm == prefer_a_norm``, as
-    the paper's Fig. 4 does, when one has two or more weights; then the most
-    weights, then the lowest seed.
+    the paper's Fig. 4 does, when one has two or more weights; then the paper's
+    tanh GRNN over the linear ablation; then the most weights, then the lowest seed.
     """
     paths: dict[tuple, dict] = {}
     for r in records:
@@ -87,7 +87,8 @@ def topology_path_records(records: list[dict], *, method: str = "grnn_sparse", w
     def rank(item):
         inst = json.loads(item[0][0])
         preferred = inst.get("a_norm") == prefer_a_norm and len(item[1]) >= 2
-        return (not preferred, -len(item[1]), inst.get("seed", 0), item[0][1])
+        linear = json.loads(item[0][1]).get("activation") == "identity"
+        return (not preferred, linear, -len(item[1]), inst.get("seed", 0), item[0][1])
 
     _, path = min(paths.items(), key=rank)
     return [path[w] for w in sorted(path)]

@@ -241,7 +241,7 @@ def _augmented_cost(instance, controller) -> float:
     return total / instance.trace_P
 
 
-@pytest.mark.parametrize("variant,beta", [("given", None), ("sparse", 0.5)])
+@pytest.mark.parametrize("variant,beta", [("given", None), ("dense", None), ("fixed", None), ("sparse", 0.5)])
 def test_linear_grnn_is_scored_exactly(unstable, variant, beta):
     """The identity activation gives a linear controller: exact cost, equal to an independent closed form."""
     design = grnn(unstable, variant=variant, beta=beta, activation="identity", steps=40, ensemble=1,

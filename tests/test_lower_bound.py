@@ -5,8 +5,9 @@ partially nested, so the optimal controller for it is linear (Ho & Chu 1972;
 Rotkowitz & Lall 2006) and the finite-horizon SLS optimum on that graph is the
 best cost *any* controller with that information reaches. On the complete graph
 with one step of delay per hop (act_delay = 1), every delayed design in the
-toolkit has at most that information: the GRNN variants (one hop per step over a
-subgraph) and the delayed sparse gains (own state now, others one step late).
+toolkit has at most that information: the GRNN variants, tanh and linear (one hop
+per step over a subgraph), and the delayed sparse gains (own state now, others one
+step late).
 """
 
 import numpy as np
@@ -42,6 +43,8 @@ def _delayed_designs(instance, steps, seed):
     designs.append(grnn(instance, variant="dense", steps=steps, ensemble=1, stability_steps=0, seed=seed))
     designs.append(grnn(instance, variant="sparse", beta=0.1, steps=steps, ensemble=1, stability_steps=0,
                         seed=seed))
+    designs.append(grnn(instance, variant="sparse", beta=0.1, steps=steps, ensemble=1, stability_steps=0,
+                        seed=seed, activation="identity"))  # linear GRNN, scored exactly
     return designs
 
 
@@ -51,6 +54,7 @@ def test_no_delayed_design_beats_the_complete_graph_sls(a_norm):
     bound = _bound(instance)
     designs = _delayed_designs(instance, steps=60, seed=0)
     assert all(d.info_model == "delayed" for d in designs)
+    assert designs[-1].cost_kind == "exact" and designs[-1].status == "optimal"
     assert not _violations(bound, designs)
 
 

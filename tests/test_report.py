@@ -100,6 +100,16 @@ def test_topology_path_prefers_the_papers_a_norm_then_the_longest_path_and_draws
     path = topology_path_records(records + [other])
     assert [r["params"]["beta"] for r in path] == [0.1, 1.0, 10.0]
     assert all(r["instance"]["seed"] == 1 and r["instance"]["a_norm"] == 1.1 for r in path)
+    # The linear ablation's path, even a longer one on the same instance, gives way to the paper's tanh GRNN.
+    linear = []
+    for beta in (0.01, 0.1, 1.0, 10.0, 100.0):
+        rec = _rec(dict(INST[0], seed=0, a_norm=1.1), "Linear GRNN-Sparse", 10, 1.2,
+                   params={"beta": beta, "activation": "identity"})
+        rec["method"] = "grnn_sparse"
+        linear.append(rec)
+    path = topology_path_records(records + linear)
+    assert [r["params"]["beta"] for r in path] == [0.1, 1.0, 10.0]
+    assert all("activation" not in r["params"] for r in path)
     inst = paper_instance(1, n=8, degree=4, a_norm=1.1, horizon=10)
     supports = [np.eye(8) + np.diag(np.ones(7), 1) * (k > 0) for k in range(3)]
     fig, axes = plot_topology_path(inst, [(b, 7 * (k > 0), 1.2, s) for k, (b, s) in enumerate(zip((0.1, 1, 10), supports))])

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 from tqdm.auto import tqdm
 
-from codesign import Design, count_links, paper_instance
+from codesign import Design, count_links
 from codesign.scoring import evaluate
 
 from .environment import environment
@@ -48,11 +48,9 @@ _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "N
 
 def build_instance(instance_spec: dict):
     """The :class:`codesign.Instance` described by a run's instance spec."""
-    kwargs = dict(instance_spec)
-    family = kwargs.pop("family")
-    if family != "paper":
-        raise ValueError(f"unknown instance family {family!r}")
-    return paper_instance(**kwargs)
+    from .families import get_family
+
+    return get_family(instance_spec["family"]).build(instance_spec)
 
 
 def instance_facts(instance) -> dict:

@@ -77,41 +77,20 @@ class SpecError(ValueError):
     """A malformed experiment spec; the message names the offending key."""
 
 
-# Fields of one expanded instance, which a method entry's `where` may filter on.
-_INSTANCE_FIELDS = {"seed", "n", "degree", "a_norm", "b_norm", "hops", "horizon"}
-_FAMILY_KEYS = {"paper": {"family", "n", "a_norms", "seeds", "degree", "b_norm", "hops", "horizon"}}
-
-
 @dataclass(frozen=True)
 class InstanceSpec:
-    """Which instances to build: every (n, a_norm, seed) combination of the family."""
+    """Which instances to build: the family's name and one instance spec (a JSON-able dict) per instance.
+
+    The family (:mod:`compare.families`) parses the spec's ``[instances]`` table
+    into these and builds each :class:`codesign.Instance` where a run executes.
+    """
 
     family: str = "paper"
-    n: tuple[int, ...] = (20,)
-    a_norms: tuple[float, ...] = (0.995,)
-    seeds: tuple[int, ...] = (0,)
-    degree: int = 6
-    b_norm: float = 1.0
-    hops: int = 3
-    horizon: int = 50
+    specs: tuple = ()
 
     def expand(self) -> list[dict]:
-        """Keyword arguments of :func:`codesign.paper_instance` for every instance, with the seed."""
-        return [
-            {
-                "family": self.family,
-                "seed": seed,
-                "n": n,
-                "degree": self.degree,
-                "a_norm": a_norm,
-                "b_norm": self.b_norm,
-                "hops": self.hops,
-                "horizon": self.horizon,
-            }
-            for n in self.n
-            for a_norm in self.a_norms
-            for seed in self.seeds
-        ]
+        """The instance specs, one dict per instance (``"family"`` included)."""
+        return [dict(spec) for spec in self.specs]
 
 
 @dataclass(frozen=True)
@@ -171,8 +150,10 @@ class Run:
 
         Keys are sorted before hashing, so the order of keys in a spec never changes a key.
         """
+        from .families import get_family
+
         payload = {
-            "instance": self.instance,
+            "instance": get_family(self.instance["family"]).identity(self.instance),
             "method": self.method,
             "params": self.params,
             "evaluation": {"noise_std": self.evaluation.noise_std, "validation_size": self.evaluation.validation_size},
@@ -268,12 +249,15 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
     description = _typed("description", data.get("description", ""), str)
     if "instances" not in data:
         raise SpecError("spec: missing [instances] table")
-    instances = _parse_instances(_typed("instances", data["instances"], dict))
+    instances = _parse_instances(_typed("instances", data["instances"], dict), base)
     evaluation = _parse_evaluation(_typed("evaluation", data.get("evaluation", {}), dict))
     raw_methods = _typed("methods", data.get("methods", []), list)
     if not raw_methods:
         raise SpecError("methods: the spec needs at least one [[methods]] entry")
-    methods = tuple(_parse_method(i, entry, base, loaded) for i, entry in enumerate(raw_methods))
+    from .families import get_family
+
+    fields = get_family(instances.family).fields
+    methods = tuple(_parse_method(i, entry, base, loaded, fields) for i, entry in enumerate(raw_methods))
     return ExperimentSpec(name, description, instances, methods, evaluation, text, tuple(loaded), sections, pairs)
 
 
@@ -320,44 +304,15 @@ def _list_of(where: str, value, kind, *, positive: bool = True) -> tuple:
     return out
 
 
-def _parse_instances(table: dict) -> InstanceSpec:
-    family = _typed("instances.family", table.get("family", "paper"), str)
-    if family not in _FAMILY_KEYS:
-        raise SpecError(f"instances.family: unknown family {family!r} (known: {', '.join(_FAMILY_KEYS)})")
-    _check_keys("instances", table, _FAMILY_KEYS[family])
-    seeds_value = table.get("seeds", 1)
-    if isinstance(seeds_value, int) and not isinstance(seeds_value, bool):
-        if seeds_value < 1:
-            raise SpecError(f"instances.seeds: a count must be >= 1, got {seeds_value}")
-        seeds = tuple(range(seeds_value))
-    else:
-        seeds = _list_of("instances.seeds", _typed("instances.seeds", seeds_value, list), int, positive=False)
-        if any(s < 0 for s in seeds):
-            raise SpecError(f"instances.seeds: seeds must be non-negative, got {list(seeds)}")
-        if len(set(seeds)) != len(seeds):
-            raise SpecError(f"instances.seeds: duplicate seeds in {list(seeds)}")
-    spec = InstanceSpec(
-        family=family,
-        n=_list_of("instances.n", table.get("n", [20]), int),
-        a_norms=_list_of("instances.a_norms", table.get("a_norms", [0.995]), float),
-        seeds=seeds,
-        degree=_typed("instances.degree", table.get("degree", 6), int),
-        b_norm=_typed("instances.b_norm", table.get("b_norm", 1.0), float),
-        hops=_typed("instances.hops", table.get("hops", 3), int),
-        horizon=_typed("instances.horizon", table.get("horizon", 50), int),
-    )
-    if any(n < 2 for n in spec.n):
-        raise SpecError(f"instances.n: sizes must be >= 2, got {list(spec.n)}")
-    if any(spec.degree > n for n in spec.n):
-        raise SpecError(f"instances.degree: {spec.degree} exceeds n = {min(spec.n)}")
-    for key, low in (("degree", 2), ("horizon", 1)):  # paper_instance's own limits
-        if getattr(spec, key) < low:
-            raise SpecError(f"instances.{key}: must be >= {low}, got {getattr(spec, key)}")
-    if spec.hops < 0:
-        raise SpecError(f"instances.hops: must be >= 0, got {spec.hops}")
-    if spec.b_norm <= 0:
-        raise SpecError(f"instances.b_norm: must be positive, got {spec.b_norm}")
-    return spec
+def _parse_instances(table: dict, base) -> InstanceSpec:
+    from .families import UnknownFamilyError, get_family
+
+    name = _typed("instances.family", table.get("family", "paper"), str)
+    try:
+        family = get_family(name)
+    except UnknownFamilyError as exc:
+        raise SpecError(f"instances.family: {exc}") from None
+    return InstanceSpec(family=name, specs=tuple(family.parse(table, base)))
 
 
 def _parse_evaluation(table: dict) -> EvaluationSpec:
@@ -371,7 +326,7 @@ def _parse_evaluation(table: dict) -> EvaluationSpec:
     return EvaluationSpec(size, noise)
 
 
-def _parse_method(index: int, entry, base, plugins: list) -> MethodSpec:
+def _parse_method(index: int, entry, base, plugins: list, fields=frozenset()) -> MethodSpec:
     where = f"methods[{index}]"
     entry = _typed(where, entry, dict)
     _check_keys(where, entry, {"method", "label", "params", "grid", "where"})
@@ -406,8 +361,9 @@ def _parse_method(index: int, entry, base, plugins: list) -> MethodSpec:
         raise SpecError(str(exc)) from None
     filters = _typed(f"{where}.where", entry.get("where", {}), dict)
     for key, values in filters.items():
-        if key not in _INSTANCE_FIELDS:
-            raise SpecError(f"{where}.where.{key}: unknown instance field (use a_norm, n, seed, degree, ...)")
+        if key not in fields:
+            raise SpecError(f"{where}.where.{key}: unknown instance field (this family has: "
+                            f"{', '.join(sorted(fields))})")
         if not isinstance(values, list) or not values:
             raise SpecError(f"{where}.where.{key}: expected a non-empty list of values, got {values!r}")
     return MethodSpec(name, label, dict(params), dict(grid), dict(filters))

@@ -30,13 +30,16 @@ _SENTINEL = 1e300
 
 
 def panel_key(instance: dict) -> tuple:
-    """The panel an instance belongs to: (family, n, a_norm)."""
-    return (instance.get("family", "?"), instance.get("n", 0), instance.get("a_norm", float("nan")))
+    """The panel an instance belongs to: (family, n, a_norm), a_norm None for families without one.
+
+    (None, not NaN: NaN keys never compare equal, so panels keyed by NaN cannot be looked up.)
+    """
+    return (instance.get("family", "?"), instance.get("n", 0), instance.get("a_norm"))
 
 
 def panel_title(key: tuple) -> str:
     family, n, a_norm = key
-    return f"N = {n}, ‖A‖₂ = {a_norm:g}" if np.isfinite(a_norm) else f"{family}, N = {n}"
+    return f"N = {n}, ‖A‖₂ = {a_norm:g}" if a_norm is not None else f"{family}, N = {n}"
 
 
 _panel = panel_key

@@ -1,0 +1,151 @@
+"""Instance families: the paper family keeps its run keys, and systems from .npz files run end to end."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from codesign import paper_instance
+from compare import SpecError, parse_spec
+from compare.cli import main
+from compare.families import Family, family_names, get_family, register_family
+from compare.store import Store
+
+SPEC = """
+name = "mine"
+[instances]
+family = "matrices"
+files = ["systems/*.npz"]
+[[methods]]
+method = "lqr"
+[[methods]]
+method = "decentralized"
+[[methods]]
+method = "truncated_lqr"
+grid = { links = [[4], [12]] }
+"""
+
+
+def _system(seed: int) -> dict:
+    inst = paper_instance(seed, n=6, degree=3, a_norm=1.05, horizon=10)
+    return {"A": inst.A, "B": inst.B, "comm_adj": inst.comm_adj, "horizon": np.array(10)}
+
+
+def _write_systems(folder):
+    systems = folder / "systems"
+    systems.mkdir()
+    for seed in (0, 1):
+        np.savez(systems / f"sys{seed}.npz", **_system(seed))
+    (folder / "mine.toml").write_text(SPEC)
+    return folder / "mine.toml"
+
+
+def _run(spec, out):
+    return CliRunner().invoke(main, ["run", str(spec), "--out", str(out), "--workers", "1", "--no-progress"])
+
+
+def test_builtin_families_are_listed():
+    assert {"paper", "matrices"} <= set(family_names())
+
+
+def test_systems_from_files_run_end_to_end_and_edits_rerun_only_that_file(tmp_path):
+    spec = _write_systems(tmp_path)
+    out = tmp_path / "out"
+    first = _run(spec, out)
+    assert first.exit_code == 0, first.output
+    assert "8 runs: 8 computed" in first.output
+    with Store(out / "results.sqlite") as store:
+        records = store.records()
+    lqr = [r for r in records if r["method"] == "lqr"]
+    assert sorted(r["instance"]["name"] for r in lqr) == ["sys0", "sys1"]
+    for r in lqr:
+        assert abs(r["cost"] - 1.0) < 1e-9 and r["links"] == 30
+    assert "matrices, N = 6" in (out / "report.md").read_text()
+
+    # Editing one file recomputes its runs only.
+    edited = _system(0)
+    edited["A"] = edited["A"] * 1.01
+    np.savez(tmp_path / "systems" / "sys0.npz", **edited)
+    second = _run(spec, out)
+    assert second.exit_code == 0, second.output
+    assert "8 runs: 4 computed, 4 already stored" in second.output
+
+    # Moving a file keeps its runs: the identity is the contents, not the path.
+    (tmp_path / "systems" / "sys1.npz").rename(tmp_path / "systems" / "renamed.npz")
+    third = _run(spec, out)
+    assert third.exit_code == 0, third.output
+    assert "8 runs: 0 computed, 8 already stored" in third.output
+
+
+def _bad(tmp_path, arrays, name="bad.npz"):
+    (tmp_path / "systems").mkdir(exist_ok=True)
+    np.savez(tmp_path / "systems" / name, **arrays)
+    (tmp_path / "mine.toml").write_text(SPEC)
+    return _run(tmp_path / "mine.toml", tmp_path / "out")
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda s: s.pop("B"), "missing array(s) B"),
+    (lambda s: s.update(A=np.full((6, 6), np.nan)), "non-finite"),
+    (lambda s: s.update(B=np.zeros((6, 6))), "not stabilizable"),
+    (lambda s: s.update(B=np.eye(5)), "B"),
+    (lambda s: s.update(extra=np.eye(6)), "unknown array(s) extra"),
+    (lambda s: s.update(state_nodes=np.array([0, 0, 1, 1, 2, 2])), "one state and one input per node"),
+])
+def test_bad_files_are_one_line_errors_naming_the_file(tmp_path, change, message):
+    arrays = _system(0)
+    change(arrays)
+    result = _bad(tmp_path, arrays)
+    assert result.exit_code == 2, result.output
+    assert "bad.npz" in result.output and message in result.output
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "out" / "results.sqlite").exists()
+
+
+def test_a_file_that_is_not_npz_is_named(tmp_path):
+    (tmp_path / "systems").mkdir()
+    (tmp_path / "systems" / "junk.npz").write_text("not an archive")
+    (tmp_path / "mine.toml").write_text(SPEC)
+    result = _run(tmp_path / "mine.toml", tmp_path / "out")
+    assert result.exit_code == 2 and "junk.npz: not a readable .npz file" in result.output
+
+
+@pytest.mark.parametrize("instances, message", [
+    ('family = "matrices"\nfiles = ["nothing*.npz"]', "instances.files[0]: no file matches"),
+    ('family = "matrices"', "instances.files: required"),
+    ('family = "matrices"\nfiles = ["x.npz"]\nseeds = 3', "instances.seeds: unknown key (allowed: family, files)"),
+    ('family = "mass_sprung"', "instances.family: unknown family 'mass_sprung' (known: matrices, paper"),
+    ('family = "paper"\nfiles = ["x.npz"]', "instances.files: unknown key"),
+])
+def test_instance_keys_are_validated_per_family(tmp_path, instances, message):
+    with pytest.raises(SpecError) as info:
+        parse_spec(f'name = "x"\n[instances]\n{instances}\n[[methods]]\nmethod = "lqr"\n', base=tmp_path)
+    assert message in str(info.value)
+
+
+def test_where_filters_name_the_familys_fields(tmp_path):
+    _write_systems(tmp_path)
+    text = SPEC.replace('method = "decentralized"', 'method = "decentralized"\nwhere = { a_norm = [1.05] }')
+    with pytest.raises(SpecError, match=r"where.a_norm: unknown instance field \(this family has: n, name\)"):
+        parse_spec(text, base=tmp_path)
+    ok = parse_spec(SPEC.replace('method = "decentralized"', 'method = "decentralized"\nwhere = { name = ["sys1"] }'),
+                    base=tmp_path)
+    assert sum(r.method == "decentralized" for r in ok.runs()) == 1
+
+
+def test_a_family_of_ones_own_can_be_registered(tmp_path):
+    def parse(table, base=None):
+        return tuple({"family": "tiny_chain", "n": n} for n in table.get("n", [4]))
+
+    def build(spec):
+        from codesign import Instance
+
+        n = spec["n"]
+        A = 1.02 * np.eye(n) + 0.1 * np.eye(n, k=1)
+        return Instance.from_matrices(A, np.eye(n), horizon=8, name=f"chain{n}")
+
+    register_family(Family("tiny_chain", "a test chain", parse, build, frozenset({"n"})))
+    spec = parse_spec('name = "c"\n[instances]\nfamily = "tiny_chain"\nn = [3, 5]\n[[methods]]\nmethod = "lqr"\n')
+    assert [r.instance["n"] for r in spec.runs()] == [3, 5]
+    assert get_family("tiny_chain").build({"family": "tiny_chain", "n": 3}).n == 3

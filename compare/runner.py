@@ -88,8 +88,15 @@ def execute_task(runs: list[Run], plugins=()) -> list[tuple[list[Design], float]
     shared equally. If the batched call fails as a whole, each run is retried
     alone so that one bad run cannot fail its neighbours.
     """
-    load_plugins(plugins)
-    method = get_method(runs[0].method)
+    try:
+        load_plugins(plugins)
+        method = get_method(runs[0].method)
+    except Exception as exc:  # the worker's environment, not the run: stop with a message, store nothing
+        names = ", ".join(str(getattr(p, "ref", p)) for p in plugins) or "(none)"
+        raise WorkerSetupError(
+            f"a worker could not load method {runs[0].method!r} (plug-ins: {names}): {exc}; install the plug-ins, "
+            "or make their files reachable at the same paths, on every worker"
+        ) from None
     if len(runs) == 1 or method.batch is None:
         return [execute_run(run) for run in runs]
     start = time.perf_counter()
@@ -152,6 +159,10 @@ def make_executor(workers: int) -> Executor:
 
 class ExecutorError(ValueError):
     """An executor address that cannot be used."""
+
+
+class WorkerSetupError(ExecutorError):
+    """A worker that cannot import the experiment's plug-ins (or find its method)."""
 
 
 @contextmanager

@@ -268,3 +268,15 @@ def test_claims_of_a_dead_process_are_taken_over(tmp_path):
         store._conn.commit()
         summary = run_experiment(parsed, store, progress=False)
         assert summary.computed == 12 and store.claims() == {}
+
+
+def test_a_worker_that_cannot_load_a_plugin_stops_the_run_with_a_message(tmp_path):
+    """A worker lacking a plug-in is the environment's fault, not the run's: no failed run is stored."""
+    from compare.plugins import Plugin
+    from compare.runner import WorkerSetupError, execute_task
+    from compare.spec import parse_spec
+
+    spec = parse_spec('name = "x"\n[instances]\nn = [6]\ndegree = 3\nhorizon = 5\n[[methods]]\nmethod = "lqr"\n')
+    missing = Plugin(ref="gone.py", target=str(tmp_path / "gone.py"))
+    with pytest.raises(WorkerSetupError, match=r"could not load method 'lqr' \(plug-ins: gone.py\).*every worker"):
+        execute_task(spec.runs(), [missing])

@@ -415,13 +415,30 @@ def gcnn(instance, *, seed: int = 0, steps: int = 750, batch: int = 20, lr: floa
     instance : Instance
     seed : int
         Seeds initializations and training draws (member k of the ensemble uses (seed, k)).
-    steps, batch, lr, decay, decay_every, weight_decay
-        Adam updates, x(0) draws per update, learning rate multiplied by ``decay``
-        after updates 0, ``decay_every``, 2 ``decay_every``, ..., coupled L2 weight decay.
+    steps : int
+        Adam updates.
+    batch : int
+        Draws x(0) ~ N(0, I) per update.
+    lr : float
+        Initial learning rate.
+    decay : float
+        Factor the learning rate is multiplied by every ``decay_every`` updates (from update 0 on).
+    decay_every : int
+        Updates between learning-rate decays.
+    weight_decay : float
+        Coupled L2 weight decay (added to the gradient, as torch.optim.Adam does).
     ensemble : int
         Models trained; the one with the lowest cost on a separate selection set is kept.
-    curve_every, curve_size, dtype, stability_steps, stability_size
-        As in :func:`codesign.grnn`.
+    curve_every : int
+        Record the selection-set cost every this many updates (0: only at the end).
+    curve_size : int
+        Draws of the selection set (training curve and ensemble selection), apart from the validation set.
+    dtype : {"float64", "float32"}
+        Training precision; float32 is about twice as fast.
+    stability_steps : int
+        Length of the boundedness check rollout (0 skips it).
+    stability_size : int
+        How many draws of the validation set the boundedness check starts from.
 
     Returns
     -------

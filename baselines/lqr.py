@@ -58,8 +58,13 @@ def decentralized(instance, *, start: str = "lqr_diagonal") -> Design:
     """Best diagonal static gain ``u_i = k_i x_i`` for the benchmark cost (zero links).
 
     Minimizes the exact normalized finite-horizon cost over the diagonal of K
-    (L-BFGS, exact gradient), starting from the diagonal of the LQR gain
-    (``start="lqr_diagonal"``) or from zero (``start="zero"``).
+    (L-BFGS, exact gradient).
+
+    Parameters
+    ----------
+    instance : Instance
+    start : {"lqr_diagonal", "zero"}
+        Where L-BFGS starts: the diagonal of the LQR gain, or zero.
     """
     if start not in ("lqr_diagonal", "zero"):
         raise ValueError(f"start must be 'lqr_diagonal' or 'zero', got {start!r}")

@@ -402,6 +402,20 @@ def sls_topologies(
     The default family runs from the given graph (infeasible at speed 1: the
     plant spreads faster than information) through the plant graph (the sparsest
     QI graph) and its 2- and 3-hop closures to the complete graph.
+
+    Parameters
+    ----------
+    instance : Instance
+    graphs : list of str
+        Graph names (see :func:`topology`), one design each.
+    speed : float
+        Hops of the graph travelled per step (> 0), as in :func:`sls`.
+    act_delay : int
+        Delay convention of the supports, as in :func:`sls`: 1 is the GRNN's model.
+    horizon : int, optional
+        Horizon of the finite-horizon QP (default: the instance's), as in :func:`sls`.
+    fir : int, optional
+        FIR length: the infinite-horizon problem with a finite response, as in :func:`sls`.
     """
     if isinstance(graphs, str) or not graphs:
         raise ValueError(f"graphs must be a non-empty list of graph names, got {graphs!r}")

@@ -447,21 +447,37 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
     seed : int
         Seeds the training draws and initializations (member k of the ensemble
         uses streams derived from (seed, k)).
-    steps, batch, hidden, lr, clip, frob
-        Adam updates (cosine-annealed learning rate), x(0) draws per update,
-        hidden size h, learning rate, gradient-norm clip, weight of the plain
-        Frobenius norms of S, F, G in the loss (W is not penalized).
+    steps : int
+        Adam updates, with the learning rate cosine-annealed to 0 over them.
+    batch : int
+        Draws x(0) ~ N(0, I) per update.
+    hidden : int
+        Hidden size h of each node's state.
+    lr : float
+        Learning rate (of the refinement, for ``sparse``).
+    l1_lr : float
+        Learning rate of the ``sparse`` variant's l1 stage (0.03 in the paper's code).
+    clip : float
+        Gradient-norm clip per model (0 disables it).
+    frob : float
+        Weight of the plain Frobenius norms of S, F, G in the loss (W is not penalized).
     ensemble : int
         Models trained per setting; the one with the lowest cost on a separate
         ``curve_size``-draw selection set is kept (for ``sparse``: of the l1 stage).
     refine_ensemble : int
         Refinement runs of the ``sparse`` variant (the paper code used one).
+    threshold : float
+        Entries of the l1 stage's S below this magnitude are cut (the paper's 0.004).
     curve_every : int
         Record the selection-set cost every this many updates (0: only at the end).
+    curve_size : int
+        Draws of the selection set (training curve and ensemble selection), apart from the validation set.
     dtype : {"float64", "float32"}
-    stability_steps, stability_size : int
-        Length of the boundedness check rollout (0 skips it) and how many draws
-        of the validation set it starts from.
+        Training precision; float32 is about twice as fast.
+    stability_steps : int
+        Length of the boundedness check rollout (0 skips it).
+    stability_size : int
+        How many draws of the validation set the boundedness check starts from.
     activation : {"tanh", "identity"}
         σ in Z(t+1) = σ(S Z(t) W + x(t) F): the paper's tanh, or the identity (the
         linear GRNN: a linear dynamic controller with the same parameterization,

@@ -53,6 +53,17 @@ def test_every_method_is_covered():
     assert {"lqr", "sparse_admm", "sls", "grnn_sparse", "gcnn", "plugin_scaled_lqr"} <= set(METHODS)
 
 
+@pytest.mark.parametrize("name", [m for m in METHODS if not m.startswith("plugin_")])
+def test_every_hyperparameter_says_what_it_means(name):
+    """`compare methods` prints one meaning per hyperparameter: present, and not shared with another one."""
+    hyper = registered_methods()[name].hyperparameters
+    missing = [h.name for h in hyper.values() if not h.doc]
+    assert not missing, f"{name}: no description for {missing} (numpydoc Parameters entry)"
+    docs = [h.doc for h in hyper.values()]
+    shared = sorted({d for d in docs if docs.count(d) > 1})
+    assert not shared, f"{name}: one description for several hyperparameters: {shared}"
+
+
 @pytest.mark.parametrize("name", METHODS)
 def test_designs_are_valid_and_reproducible(instance, name):
     method = registered_methods()[name]

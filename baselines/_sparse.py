@@ -18,14 +18,10 @@ from codesign.design import Design, count_links
 from codesign.evaluation import spectral_radius, static_gain_cost, static_gain_cost_and_grad
 
 from .lqr import decentralized
-from .polish import polish_gain
+from .polish import GRAD_RTOL, polish_gain
 
 __all__ = ["GRAD_RTOL", "check_gammas", "pattern_of", "polished_gain", "gain_design",
            "as_path_point", "design_on_pattern", "with_diagonal_end", "DecentralizedCache"]
-
-#: A polished gain counts as optimal on its pattern when the masked gradient norm
-#: of the normalized cost is below this fraction of the cost.
-GRAD_RTOL = 1e-6
 
 
 def check_gammas(gammas) -> np.ndarray:

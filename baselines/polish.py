@@ -11,7 +11,13 @@ import numpy as np
 
 from codesign.evaluation import static_gain_cost_and_grad
 
-__all__ = ["polish_gain", "PolishResult"]
+#: A polished gain counts as optimal on its pattern when the masked gradient norm
+#: of the normalized cost is below this fraction of the cost (whatever L-BFGS's own
+#: stopping message says: its line search can end "abnormally" at that precision,
+#: depending on the BLAS build and thread count).
+GRAD_RTOL = 1e-6
+
+__all__ = ["polish_gain", "PolishResult", "GRAD_RTOL"]
 
 
 class PolishResult:

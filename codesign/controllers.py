@@ -94,23 +94,28 @@ class StaticGain:
 @register_controller("zero")
 @dataclass(frozen=True, eq=False)
 class ZeroInput:
-    """``u = 0``: the autonomous (open-loop) system."""
+    """``u = 0``: the autonomous (open-loop) system, with n states and m inputs (m = n by default)."""
 
     n: int
+    m: int | None = None
+
+    @property
+    def inputs(self) -> int:
+        return self.n if self.m is None else self.m
 
     def reset(self, batch: int):
         return None
 
     def step(self, state, x):
-        return np.zeros_like(x), None
+        return np.zeros((x.shape[0], self.inputs)), None
 
     def arrays(self) -> dict:
-        return {"n": np.array(self.n)}
+        return {"n": np.array(self.n)} if self.m is None else {"n": np.array(self.n), "m": np.array(self.m)}
 
     @classmethod
     def from_arrays(cls, arrays: dict) -> "ZeroInput":
-        return cls(int(arrays["n"]))
+        return cls(int(arrays["n"]), int(arrays["m"]) if "m" in arrays else None)
 
     @property
     def K(self) -> np.ndarray:
-        return np.zeros((self.n, self.n))
+        return np.zeros((self.inputs, self.n))

@@ -109,7 +109,7 @@ def response_cost(instance, phi_x, phi_u, *, noise_std: float = 0.0) -> float:
     ----------
     phi_x : array_like, shape (T + 1, n, n)
         ``x(t) = phi_x[t] x(0)`` for t = 0..T (so ``phi_x[0] = I``).
-    phi_u : array_like, shape (T, n, n)
+    phi_u : array_like, shape (T, m, n)
         ``u(t) = phi_u[t] x(0)`` for t = 0..T-1.
     noise_std : float
         Process noise ``w(t) ~ N(0, noise_std^2 I)`` added to ``x(t+1)`` for
@@ -120,10 +120,10 @@ def response_cost(instance, phi_x, phi_u, *, noise_std: float = 0.0) -> float:
     """
     phi_x = np.asarray(phi_x, dtype=float)
     phi_u = np.asarray(phi_u, dtype=float)
-    T, n = instance.horizon, instance.n
-    if phi_x.shape != (T + 1, n, n) or phi_u.shape != (T, n, n):
+    T, n, m = instance.horizon, instance.n, instance.m
+    if phi_x.shape != (T + 1, n, n) or phi_u.shape != (T, m, n):
         raise ValueError(
-            f"response maps must have shapes {(T + 1, n, n)} and {(T, n, n)}, "
+            f"response maps must have shapes {(T + 1, n, n)} and {(T, m, n)}, "
             f"got {phi_x.shape} and {phi_u.shape}"
         )
     if not (np.isfinite(noise_std) and noise_std >= 0):
@@ -195,8 +195,9 @@ def _quadratic_features(instance, x0):
     extra = None
     if rows.size > budget:
         coupled = (instance.plant_adj != 0) | (instance.comm_adj != 0)
-        coupled = coupled | coupled.T
-        keep = (rows == cols) | coupled[rows, cols]
+        coupled = coupled | coupled.T | np.eye(coupled.shape[0], dtype=bool)
+        nodes = instance.state_nodes  # the graphs are between nodes; the monomials between states
+        keep = (rows == cols) | coupled[nodes[rows], nodes[cols]]
         rows, cols = rows[keep], cols[keep]
         name = f"{rows.size} squares and graph-coupled monomials + x0'Px0"
         if rows.size + 1 > budget:
@@ -330,10 +331,10 @@ def impulse_responses(instance, controller, steps: int | None = None):
     :func:`response_cost` scores exactly. Shapes ``(steps + 1, n, n)`` and
     ``(steps, n, n)``; ``steps`` defaults to the horizon.
     """
-    n = instance.n
+    n, m = instance.n, instance.m
     steps = instance.horizon if steps is None else int(steps)
     phi_x = np.empty((steps + 1, n, n))
-    phi_u = np.empty((steps, n, n))
+    phi_u = np.empty((steps, m, n))
     x = np.eye(n)  # row j: the trajectory from x(0) = e_j
     state = controller.reset(n)
     phi_x[0] = x.T

@@ -54,22 +54,28 @@ class Instance:
 
     Attributes
     ----------
-    A, B : ndarray, shape (n, n)
-        Dynamics ``x(t+1) = A x(t) + B u(t)`` (one scalar state and input per node).
-    Q, R : ndarray, shape (n, n)
+    A : ndarray, shape (n, n)
+    B : ndarray, shape (n, m)
+        Dynamics ``x(t+1) = A x(t) + B u(t)`` with n states and m inputs.
+    Q : ndarray, shape (n, n)
+    R : ndarray, shape (m, m)
         Stage cost ``x'Qx + u'Ru``.
     P : ndarray, shape (n, n)
         Terminal cost, the stabilizing DARE solution.
     horizon : int
         T; the cost sums stages 0..T-1 and adds ``x(T)' P x(T)``.
-    comm_adj : ndarray of {0, 1}, shape (n, n)
-        The given communication graph, self-loops included; ``comm_adj[i, j] = 1``
-        means node i may receive from node j.
-    plant_adj : ndarray of {0, 1}, shape (n, n)
-        Support of ``A`` or ``B``: who influences whom in one step.
+    comm_adj : ndarray of {0, 1}, shape (N, N)
+        The given communication graph between the N nodes, self-loops included;
+        ``comm_adj[i, j] = 1`` means node i may receive from node j.
+    plant_adj : ndarray of {0, 1}, shape (N, N)
+        Who influences whom in one step: node j's states or inputs enter node i's
+        states through ``A`` or ``B``.
     spec : dict
         Where the instance came from (family and arguments); JSON-serializable. It
         keys stored results, so two instances with the same spec are the same.
+    state_nodes, input_nodes : ndarray of int, shapes (n,) and (m,)
+        The node each state and each input belongs to (nodes 0..N-1). By default
+        one state and one input per node, in order (the paper's family).
     """
 
     A: np.ndarray
@@ -81,6 +87,8 @@ class Instance:
     comm_adj: np.ndarray
     plant_adj: np.ndarray
     spec: dict[str, Any] = field(default_factory=dict)
+    state_nodes: np.ndarray | None = None
+    input_nodes: np.ndarray | None = None
 
     # -- construction -----------------------------------------------------
     @classmethod
@@ -94,23 +102,33 @@ class Instance:
         comm_adj=None,
         horizon: int = 50,
         name: str | None = None,
+        state_nodes=None,
+        input_nodes=None,
     ) -> "Instance":
         """Build an instance from a user's own matrices, with validation.
 
         Parameters
         ----------
-        A, B : array_like, shape (n, n)
-            Dynamics. One scalar state and one scalar input per node.
-        Q, R : array_like, shape (n, n), optional
+        A : array_like, shape (n, n)
+        B : array_like, shape (n, m)
+            Dynamics.
+        Q : array_like, shape (n, n), optional
+        R : array_like, shape (m, m), optional
             Stage costs, identity by default. ``Q`` must be symmetric positive
-            semidefinite and ``R`` symmetric positive definite.
-        comm_adj : array_like, shape (n, n), optional
-            Given communication graph (nonzero = link). Self-loops are added.
-            Defaults to the plant graph.
+            semidefinite and not zero, ``R`` symmetric positive definite.
+        comm_adj : array_like, shape (N, N), optional
+            Given communication graph between the N nodes (nonzero = link).
+            Self-loops are added. Defaults to the plant graph.
         horizon : int
             Finite horizon T >= 1.
         name : str, optional
             A label stored in :attr:`spec`.
+        state_nodes : array_like of int, shape (n,), optional
+            The node of each state, numbering the nodes 0..N-1; every node has at
+            least one state. Default: one state per node (N = n).
+        input_nodes : array_like of int, shape (m,), optional
+            The node of each input (a node may have none). Default: one input per
+            node, which needs m = N.
 
         Raises
         ------
@@ -123,53 +141,89 @@ class Instance:
         if A.shape != (n, n):
             raise InstanceError(f"A must be square, got shape {A.shape}")
         B = _as_matrix("B", B)
-        if B.shape != (n, n):
-            raise InstanceError(
-                f"B must have shape {(n, n)} to match A (one input per node), got {B.shape}"
-            )
+        if B.shape[0] != n:
+            raise InstanceError(f"B must have {n} rows to match A, got shape {B.shape}")
+        m = B.shape[1]
+        state_nodes, input_nodes = _node_maps(n, m, state_nodes, input_nodes)
+        nodes = int(state_nodes.max()) + 1
         Q = np.eye(n) if Q is None else _as_matrix("Q", Q)
-        R = np.eye(n) if R is None else _as_matrix("R", R)
-        for label, M in (("Q", Q), ("R", R)):
-            if M.shape != (n, n):
-                raise InstanceError(f"{label} must have shape {(n, n)}, got {M.shape}")
+        R = np.eye(m) if R is None else _as_matrix("R", R)
+        for label, M, size in (("Q", Q, n), ("R", R, m)):
+            if M.shape != (size, size):
+                raise InstanceError(f"{label} must have shape {(size, size)}, got {M.shape}")
             if not np.allclose(M, M.T, atol=1e-10 * max(1.0, np.abs(M).max())):
                 raise InstanceError(f"{label} must be symmetric")
         q_min = np.linalg.eigvalsh(Q).min()
         if q_min < -1e-10 * max(1.0, np.abs(Q).max()):
             raise InstanceError(f"Q must be positive semidefinite (smallest eigenvalue {q_min:.3g})")
+        if not np.any(Q):
+            raise InstanceError("Q must not be zero: costs are normalized by trace(P), which would be 0")
         r_min = np.linalg.eigvalsh(R).min()
         if r_min <= 1e-12 * max(1.0, np.abs(R).max()):
             raise InstanceError(f"R must be positive definite (smallest eigenvalue {r_min:.3g})")
         if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
             raise InstanceError(f"horizon must be a positive integer, got {horizon!r}")
-        plant_adj = ((A != 0) | (B != 0)).astype(float)
+        plant_adj = _node_coupling(A != 0, state_nodes, state_nodes, nodes)
+        plant_adj = ((plant_adj + _node_coupling(B != 0, state_nodes, input_nodes, nodes)) != 0).astype(float)
         if comm_adj is None:
             comm = plant_adj.copy()
         else:
             comm = _as_matrix("comm_adj", comm_adj)
-            if comm.shape != (n, n):
-                raise InstanceError(f"comm_adj must have shape {(n, n)}, got {comm.shape}")
+            if comm.shape != (nodes, nodes):
+                raise InstanceError(f"comm_adj must have shape {(nodes, nodes)} (one row per node), got {comm.shape}")
             comm = (comm != 0).astype(float)
         np.fill_diagonal(comm, 1.0)
         P = solve_dare(A, B, Q, R)
         digest = hashlib.sha256()
-        for M in (A, B, Q, R, comm):
+        scalar = nodes == n == m and np.array_equal(state_nodes, np.arange(n)) and np.array_equal(input_nodes, np.arange(m))
+        for M in (A, B, Q, R, comm) + (() if scalar else (state_nodes, input_nodes)):
             digest.update(np.ascontiguousarray(M, dtype=float).tobytes())
-        spec = {"family": "matrices", "n": n, "horizon": int(horizon), "sha256": digest.hexdigest()[:16]}
+        spec = {"family": "matrices", "n": nodes, "horizon": int(horizon), "sha256": digest.hexdigest()[:16]}
+        if not scalar:
+            spec.update(states=n, inputs=m)
         if name is not None:
             spec["name"] = str(name)
-        return cls(A, B, Q, R, P, int(horizon), comm, plant_adj, spec)
+        return cls(A, B, Q, R, P, int(horizon), comm, plant_adj, spec, state_nodes, input_nodes)
 
     def __post_init__(self):
         for name in ("A", "B", "Q", "R", "P", "comm_adj", "plant_adj"):
             object.__setattr__(self, name, _frozen(getattr(self, name)))
         object.__setattr__(self, "spec", dict(self.spec))
+        for name, size in (("state_nodes", self.A.shape[0]), ("input_nodes", self.B.shape[1])):
+            value = getattr(self, name)
+            nodes = np.arange(size) if value is None else np.array(value, dtype=int, copy=True)
+            nodes.setflags(write=False)
+            object.__setattr__(self, name, nodes)
 
     # -- derived quantities -------------------------------------------------
     @property
     def n(self) -> int:
-        """Number of nodes (subsystems)."""
+        """Number of states (equal to the number of nodes when each node has one state)."""
         return self.A.shape[0]
+
+    @property
+    def m(self) -> int:
+        """Number of inputs."""
+        return self.B.shape[1]
+
+    @property
+    def nodes(self) -> int:
+        """Number of nodes N: the size of the communication and plant graphs."""
+        return self.comm_adj.shape[0]
+
+    @property
+    def scalar_nodes(self) -> bool:
+        """One state and one input per node, in order (every method supports this)."""
+        return (self.n == self.m == self.nodes and np.array_equal(self.state_nodes, np.arange(self.n))
+                and np.array_equal(self.input_nodes, np.arange(self.m)))
+
+    def node_support(self, K) -> np.ndarray:
+        """Node-level support (N, N) of a gain K (m, n): node i uses node j if any input of i reads a state of j."""
+        return _node_coupling(np.asarray(K) != 0, self.input_nodes, self.state_nodes, self.nodes)
+
+    def block_mask(self) -> np.ndarray:
+        """(m, n) mask of the gain entries from a node's own states to its own inputs (decentralized)."""
+        return self.input_nodes[:, None] == self.state_nodes[None, :]
 
     @property
     def seed(self) -> int:
@@ -209,6 +263,42 @@ class Instance:
     def __repr__(self) -> str:
         spec = ", ".join(f"{k}={v!r}" for k, v in self.spec.items())
         return f"Instance({spec})"
+
+
+def _node_maps(n: int, m: int, state_nodes, input_nodes) -> tuple[np.ndarray, np.ndarray]:
+    """Validated node of each state and input; one per node by default."""
+    def as_nodes(label, value, size):
+        nodes = np.asarray(value)
+        if nodes.shape != (size,):
+            raise InstanceError(f"{label} must have one entry per {label.split('_')[0]} ({size}), got shape {nodes.shape}")
+        if not np.issubdtype(nodes.dtype, np.integer) or (nodes.size and nodes.min() < 0):
+            raise InstanceError(f"{label} must hold node numbers 0, 1, ..., got {nodes.tolist()}")
+        return nodes.astype(int)
+
+    sn = np.arange(n) if state_nodes is None else as_nodes("state_nodes", state_nodes, n)
+    nodes = int(sn.max()) + 1 if sn.size else 0
+    missing = sorted(set(range(nodes)) - set(sn.tolist()))
+    if missing:
+        raise InstanceError(f"state_nodes: every node 0..{nodes - 1} needs a state; nodes {missing} have none")
+    if input_nodes is None:
+        if m != nodes:
+            raise InstanceError(f"B has {m} columns but there are {nodes} nodes: pass input_nodes "
+                                "(the node of each input) unless each node has one input")
+        un = np.arange(m)
+    else:
+        un = as_nodes("input_nodes", input_nodes, m)
+        if un.size and un.max() >= nodes:
+            raise InstanceError(f"input_nodes names node {int(un.max())}, but state_nodes has nodes 0..{nodes - 1}")
+    return sn, un
+
+
+def _node_coupling(support: np.ndarray, row_nodes, col_nodes, nodes: int) -> np.ndarray:
+    """(N, N) 0/1 matrix: 1 where some row of node i and column of node j are coupled in ``support``."""
+    rows = np.zeros((nodes, support.shape[0]))
+    rows[row_nodes, np.arange(support.shape[0])] = 1.0
+    cols = np.zeros((nodes, support.shape[1]))
+    cols[col_nodes, np.arange(support.shape[1])] = 1.0
+    return ((rows @ support.astype(float) @ cols.T) != 0).astype(float)
 
 
 def _as_matrix(label: str, value) -> np.ndarray:

@@ -101,6 +101,11 @@ class Method:
         The hyperparameter a ``topology_path`` runs along (e.g. ``"beta"``).
     modules : tuple of str
         Modules whose source defines the method (for the code fingerprint).
+    node_blocks : bool
+        Whether the method handles nodes with several states or inputs
+        (:attr:`codesign.Instance.scalar_nodes` False). A method that does not is
+        never called on such an instance: its run records a ``failed`` design
+        saying so.
     """
 
     name: str
@@ -113,6 +118,7 @@ class Method:
     produces: tuple = ()
     path_param: str | None = None
     modules: tuple = ()
+    node_blocks: bool = False
 
     def __post_init__(self):
         unknown = set(self.produces) - set(PRODUCTS)
@@ -138,6 +144,7 @@ class Method:
         batch_size: int = 64,
         produces: tuple = (),
         path_param: str | None = None,
+        node_blocks: bool = False,
     ) -> "Method":
         """A method from a function's keyword-only parameters.
 
@@ -162,6 +169,7 @@ class Method:
             produces=tuple(produces),
             path_param=path_param,
             modules=modules,
+            node_blocks=node_blocks,
         )
 
     def check_params(self, params: dict, where: str = "params") -> None:
@@ -181,15 +189,26 @@ class Method:
         # A design that names no params (e.g. from codesign.score) gets the run's.
         return [replace(d, method=self.name, params=d.params or dict(params)) for d in designs]
 
+    def unsupported(self, instance, params: dict) -> list[Design] | None:
+        """The recorded failure for an instance this method cannot handle, or None."""
+        if self.node_blocks or getattr(instance, "scalar_nodes", True):
+            return None
+        return [Design.failure(self.name, dict(params), "failed",
+                               f"method {self.name!r} does not handle nodes with several states or inputs "
+                               f"({instance.n} states and {instance.m} inputs on {instance.nodes} nodes)")]
+
     def __call__(self, instance, **params) -> list[Design]:
         """Designs for one instance (always a list), with the name stamped in."""
         self.check_params(params)
+        refused = self.unsupported(instance, params)
+        if refused is not None:
+            return refused
         return self._stamp(self.design(instance, **params), params)
 
     def run_batch(self, pairs) -> list[list[Design]]:
         """Designs for many (instance, params) pairs: one batched call if the method has one."""
         pairs = list(pairs)
-        if self.batch is None:
+        if self.batch is None or any(self.unsupported(instance, params) for instance, params in pairs):
             return [self(instance, **params) for instance, params in pairs]
         for _, params in pairs:
             self.check_params(params)
@@ -349,6 +368,7 @@ def method(
     batch_size: int = 64,
     produces: tuple = (),
     path_param: str | None = None,
+    node_blocks: bool = False,
 ):
     """Decorator: register ``f(instance, *, ...)`` as a design method and return it unchanged.
 
@@ -363,14 +383,14 @@ def method(
     bind, exclude
         Keywords fixed to a value (``bind``) or hidden (``exclude``); neither is a
         hyperparameter. Lets one function serve several methods.
-    batch, batch_size, produces, path_param
+    batch, batch_size, produces, path_param, node_blocks
         See :class:`Method`.
     """
 
     def decorate(func):
         register(Method.from_function(func, name=name, label=label, summary=summary, bind=bind, exclude=exclude,
                                       batch=batch, batch_size=batch_size, produces=produces,
-                                      path_param=path_param))
+                                      path_param=path_param, node_blocks=node_blocks))
         return func
 
     return decorate

@@ -19,11 +19,17 @@ from .evaluation import VALIDATION_SIZE, exact_cost, simulate, validation_set
 __all__ = ["score", "evaluate"]
 
 
-def _support(controller):
+def _support(instance, controller):
+    """The controller's node-level support (N, N), from its own ``support`` or its gain ``K``."""
     support = getattr(controller, "support", None)
     if support is None:
         support = getattr(controller, "K", None)
-    return None if support is None else np.asarray(support)
+    if support is None:
+        return None
+    support = np.asarray(support)
+    if support.shape == (instance.m, instance.n) and support.shape != (instance.nodes, instance.nodes):
+        support = instance.node_support(support)  # a gain's entries, input by state
+    return support
 
 
 def score(
@@ -69,7 +75,7 @@ def score(
         (``"simulated"``; see :func:`codesign.evaluation.control_variate_estimate`); status
         ``"diverged"`` when the rollout is unbounded.
     """
-    support = _support(controller)
+    support = _support(instance, controller)
     if support is not None:
         counted = count_links(support)
         links = counted[0] if links is None else links

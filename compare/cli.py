@@ -19,12 +19,12 @@ __all__ = ["main"]
 #: Approximate wall time of ``compare run PRESET`` on 2 cores (2 workers), report included.
 #: A preset missing here is listed as "not measured".
 PRESET_TIMES = {
-    "quick": "~2 min",
+    "quick": "~4 min (229 s measured)",
     "baselines-small": "~1 min (estimated from its size, not measured)",
     "sls-small": "~1 min (estimated from its size, not measured)",
     "table1-small": "~1-2 min (estimated from table1's per-run times, not measured)",
-    "table1": "~25 min",
-    "tradeoff": "~45 min",
+    "table1": "~31 min (1871 s measured)",
+    "tradeoff": "~70 min (estimated from its size, not yet measured)",
 }
 
 

@@ -260,7 +260,9 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
                                 ha="center", va="top", fontsize=7, color=styles[p.label][0])
         ax.set_xscale("symlog", linthresh=1.0)
         ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
-        ax.set_xlim(left=-0.4)
+        # Explicit: autoscaling ignores the dodged markers (drawn with an offset transform),
+        # which left methods sharing a link count outside the axes.
+        ax.set_xlim(-0.4, max(p.links[2] for p in usable) * 1.15 + 1)
         ax.set_xlabel("directed off-diagonal links (median, IQR bars)")
         ax.set_ylabel("normalized cost E[J] / tr(P) (median, IQR bars)")
         ax.set_title(panel_title(panel))

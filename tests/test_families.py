@@ -46,7 +46,7 @@ def _run(spec, out):
 
 
 def test_builtin_families_are_listed():
-    assert {"paper", "matrices"} <= set(family_names())
+    assert {"paper", "matrices", "mass_spring"} <= set(family_names())
 
 
 def test_systems_from_files_run_end_to_end_and_edits_rerun_only_that_file(tmp_path):
@@ -91,7 +91,10 @@ def _bad(tmp_path, arrays, name="bad.npz"):
     (lambda s: s.update(B=np.zeros((6, 6))), "not stabilizable"),
     (lambda s: s.update(B=np.eye(5)), "B"),
     (lambda s: s.update(extra=np.eye(6)), "unknown array(s) extra"),
-    (lambda s: s.update(state_nodes=np.array([0, 0, 1, 1, 2, 2])), "one state and one input per node"),
+    (lambda s: s.update(state_nodes=np.array([0, 0, 1, 1, 2, 2])), "B has 6 columns but there are 3 nodes"),
+    (lambda s: s.update(state_nodes=np.array([0, 0, 1, 1, 3, 3]), input_nodes=np.arange(6) // 2),
+     "nodes [2] have none"),
+    (lambda s: s.update(Q=np.zeros((6, 6))), "Q must not be zero"),
 ])
 def test_bad_files_are_one_line_errors_naming_the_file(tmp_path, change, message):
     arrays = _system(0)
@@ -115,7 +118,7 @@ def test_a_file_that_is_not_npz_is_named(tmp_path):
     ('family = "matrices"\nfiles = ["nothing*.npz"]', "instances.files[0]: no file matches"),
     ('family = "matrices"', "instances.files: required"),
     ('family = "matrices"\nfiles = ["x.npz"]\nseeds = 3', "instances.seeds: unknown key (allowed: family, files)"),
-    ('family = "mass_sprung"', "instances.family: unknown family 'mass_sprung' (known: matrices, paper"),
+    ('family = "mass_sprung"', "instances.family: unknown family 'mass_sprung' (known: mass_spring, matrices, paper"),
     ('family = "paper"\nfiles = ["x.npz"]', "instances.files: unknown key"),
 ])
 def test_instance_keys_are_validated_per_family(tmp_path, instances, message):
@@ -149,3 +152,77 @@ def test_a_family_of_ones_own_can_be_registered(tmp_path):
     spec = parse_spec('name = "c"\n[instances]\nfamily = "tiny_chain"\nn = [3, 5]\n[[methods]]\nmethod = "lqr"\n')
     assert [r.instance["n"] for r in spec.runs()] == [3, 5]
     assert get_family("tiny_chain").build({"family": "tiny_chain", "n": 3}).n == 3
+
+
+# -- nodes with several states: the mass-spring chain ------------------------------------------
+from codesign import Instance, compare_exact_and_simulated, count_links, get_method  # noqa: E402
+from compare.families.mass_spring import mass_spring_instance  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def chain():
+    return mass_spring_instance(8)
+
+
+def test_mass_spring_nodes_hold_a_position_and_a_velocity(chain):
+    assert (chain.n, chain.m, chain.nodes) == (16, 8, 8) and not chain.scalar_nodes
+    np.testing.assert_array_equal(chain.state_nodes, np.r_[np.arange(8), np.arange(8)])
+    chain_graph = np.eye(8) + np.eye(8, k=1) + np.eye(8, k=-1)
+    np.testing.assert_array_equal(chain.comm_adj, chain_graph)
+    assert chain.spec == {"family": "mass_spring", "n": 8, "seed": 0, "dt": 0.2, "horizon": 50, "r": 1.0}
+    assert mass_spring_instance(8, seed=1).A.tolist() != chain.A.tolist()
+
+
+def test_lqr_and_the_block_diagonal_gain_count_links_between_nodes(chain):
+    lqr = get_method("lqr")(chain)[0]
+    assert abs(lqr.cost - 1.0) < 1e-9 and (lqr.links, lqr.self_loops) == (56, 8)
+    local = get_method("decentralized")(chain)[0]
+    assert local.status == "optimal" and (local.links, local.self_loops) == (0, 8)
+    K = local.controller.K
+    assert K.shape == (8, 16) and np.all(K[~chain.block_mask()] == 0) and np.any(K[chain.block_mask()] != 0)
+    assert local.cost < get_method("autonomous")(chain)[0].cost
+
+
+def test_exact_and_simulated_costs_agree_for_a_block_sparse_gain(chain):
+    rng = np.random.default_rng(3)
+    node_links = np.zeros((8, 8), bool)
+    node_links[[0, 3, 5], [1, 2, 6]] = True
+    allowed = chain.block_mask() | node_links[chain.input_nodes][:, chain.state_nodes]
+    K = np.where(allowed, np.asarray(get_method("decentralized")(chain)[0].controller.K) + 0.05 *
+                 rng.standard_normal((8, 16)), 0.0)
+    from codesign import StaticGain, score
+
+    design = score(chain, StaticGain(K))
+    assert design.cost_kind == "exact" and (design.links, design.self_loops) == (3, 8)
+    check = compare_exact_and_simulated(chain, StaticGain(K))
+    assert abs(check["z"]) < 3
+    np.testing.assert_allclose(check["control_variate"], check["exact"], rtol=1e-9)
+    assert count_links(chain.node_support(K)) == (3, 8)
+
+
+def test_methods_without_node_blocks_record_a_failure(chain):
+    for name in ("sparse_admm", "sls", "grnn_sparse", "gcnn"):
+        (design,) = get_method(name)(chain)
+        assert design.status == "failed" and "several states or inputs" in design.message
+
+
+def test_a_mass_spring_experiment_runs_end_to_end(tmp_path):
+    (tmp_path / "chain.toml").write_text(
+        'name = "chain"\n[instances]\nfamily = "mass_spring"\nn = [6]\nseeds = 2\nhorizon = 20\n'
+        '[[methods]]\nmethod = "lqr"\n[[methods]]\nmethod = "decentralized"\n[[methods]]\nmethod = "sparse_admm"\n')
+    result = _run(tmp_path / "chain.toml", tmp_path / "out")
+    assert result.exit_code == 0, result.output
+    assert "6 runs: 6 computed" in result.output and "2 failed" in result.output
+    assert "mass_spring, N = 6" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_node_maps_are_validated_by_name():
+    A, B = np.eye(4) * 0.9, np.eye(4)[:, :2]
+    with pytest.raises(ValueError, match="B has 2 columns but there are 4 nodes"):
+        Instance.from_matrices(A, B)
+    with pytest.raises(ValueError, match="state_nodes must have one entry per state"):
+        Instance.from_matrices(A, B, state_nodes=[0, 1], input_nodes=[0, 1])
+    with pytest.raises(ValueError, match="input_nodes names node 5"):
+        Instance.from_matrices(A, B, state_nodes=[0, 0, 1, 1], input_nodes=[0, 5])
+    inst = Instance.from_matrices(A, B, state_nodes=[0, 0, 1, 1], input_nodes=[0, 1])
+    assert (inst.nodes, inst.n, inst.m) == (2, 4, 2) and inst.comm_adj.shape == (2, 2)

@@ -73,7 +73,7 @@ def test_from_matrices_defaults_and_roundtrip():
     "kwargs, match",
     [
         (dict(A=np.ones((3, 2)), B=np.eye(3)), "A must be square"),
-        (dict(A=np.eye(3), B=np.eye(2)), "B must have shape"),
+        (dict(A=np.eye(3), B=np.eye(2)), "B must have 3 rows to match A"),
         (dict(A=np.array([[np.nan, 0], [0, 1]]), B=np.eye(2)), "A has non-finite"),
         (dict(A=np.eye(2), B=np.array([[np.inf, 0], [0, 1]])), "B has non-finite"),
         (dict(A=np.eye(2), B=np.eye(2), Q=-np.eye(2)), "Q must be positive semidefinite"),

@@ -68,6 +68,16 @@ def test_single_setting_methods_at_the_same_link_count_are_dodged():
     assert len(offsets) == 2 and len(set(offsets.values())) == 2
 
 
+def test_dodged_markers_stay_inside_the_axes():
+    """Methods that share a link count are drawn with an offset transform, which autoscaling ignores."""
+    records = [_rec(inst, label, 56, 1.0 + 0.1 * k) for inst in INST for k, label in enumerate(("lqr", "dense"))]
+    records += [_rec(inst, "path", links, 1.5 - 0.01 * links, params={"gamma": links})
+                for inst in INST for links in (0, 2, 5)]
+    fig, axes = plot_cost_vs_links(aggregate(records))
+    assert axes[0].get_xlim()[1] > 56
+    fig.clf()
+
+
 def test_many_methods_get_distinct_colour_and_marker_pairs():
     from compare.figures import label_styles
 

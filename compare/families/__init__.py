@@ -25,7 +25,8 @@ from typing import Callable
 __all__ = ["Family", "register_family", "get_family", "family_names", "UnknownFamilyError"]
 
 #: Modules of the built-in families, imported on first use.
-_BUILTIN = {"paper": "compare.families.paper", "matrices": "compare.families.matrices"}
+_BUILTIN = {"paper": "compare.families.paper", "matrices": "compare.families.matrices",
+            "mass_spring": "compare.families.mass_spring"}
 _FAMILIES: dict[str, "Family"] = {}
 
 

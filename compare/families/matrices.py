@@ -6,12 +6,11 @@ Spec::
     family = "matrices"
     files = ["systems/*.npz", "chain.npz"]    # paths or globs, relative to the spec file
 
-Each file holds arrays ``A`` and ``B`` (n × n: one state and one input per
-node) and optionally ``Q``, ``R`` (identity by default), ``comm_adj`` (the given
-communication graph, nonzero = node i receives from node j; the plant graph by
-default) and ``horizon`` (a scalar, 50 by default). ``state_nodes`` and
-``input_nodes`` may be given only as one state and one input per node, in order;
-nodes with several states are not supported yet.
+Each file holds arrays ``A`` (n × n) and ``B`` (n × m) and optionally ``Q``,
+``R`` (identity by default), ``state_nodes`` and ``input_nodes`` (the node of
+each state and input; one per node by default), ``comm_adj`` (the given
+communication graph between nodes, nonzero = node i receives from node j; the
+plant graph by default) and ``horizon`` (a scalar, 50 by default).
 
 An instance's identity in the store is the SHA-256 of its file's contents, not
 its path: editing a file gives new runs, moving or renaming it does not. A file
@@ -73,10 +72,6 @@ def _instance(arrays: dict, name: str):
     unknown = sorted(set(arrays) - set(REQUIRED) - set(OPTIONAL))
     if unknown:
         raise ValueError(f"unknown array(s) {', '.join(unknown)} (known: {', '.join(REQUIRED + OPTIONAL)})")
-    n = arrays["A"].shape[0] if arrays["A"].ndim == 2 else -1
-    for key in ("state_nodes", "input_nodes"):
-        if key in arrays and not np.array_equal(np.asarray(arrays[key]).ravel(), np.arange(n)):
-            raise ValueError(f"{key}: only one state and one input per node (0, 1, ..., n-1) is supported so far")
     horizon = 50
     if "horizon" in arrays:
         h = arrays["horizon"]
@@ -84,7 +79,8 @@ def _instance(arrays: dict, name: str):
             raise ValueError(f"horizon must be a scalar integer, got {h!r}")
         horizon = int(h)
     return Instance.from_matrices(arrays["A"], arrays["B"], Q=arrays.get("Q"), R=arrays.get("R"),
-                                  comm_adj=arrays.get("comm_adj"), horizon=horizon, name=name)
+                                  comm_adj=arrays.get("comm_adj"), horizon=horizon, name=name,
+                                  state_nodes=arrays.get("state_nodes"), input_nodes=arrays.get("input_nodes"))
 
 
 def parse(table: dict, base=None) -> tuple:
@@ -102,7 +98,7 @@ def parse(table: dict, base=None) -> tuple:
         if digest in seen:
             raise SpecError(f"instances.files: {path} has the same contents as {seen[digest]}")
         seen[digest] = path
-        specs.append({"family": "matrices", "name": path.stem, "n": int(instance.n),
+        specs.append({"family": "matrices", "name": path.stem, "n": int(instance.nodes),
                       "file": str(path), "sha256": digest})
     return tuple(specs)
 

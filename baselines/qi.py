@@ -147,13 +147,13 @@ def is_quadratically_invariant(instance, comm_adj, *, speed: float = 1, act_dela
         ``.qi`` and, when it fails, the first violating pair with the reason.
     """
     comm = np.asarray(comm_adj)
-    n = instance.n
+    n = instance.nodes
     if comm.shape != (n, n):
-        raise ValueError(f"comm_adj must have shape {(n, n)}, got {comm.shape}")
+        raise ValueError(f"comm_adj must have shape {(n, n)} (one row per node), got {comm.shape}")
     speed = _check_speed(speed)
     act_delay = _check_act_delay(act_delay)
     D = controller_delays(comm, speed, act_delay)
-    p = propagation_delays(instance.A, instance.B)
+    p = _by_node(propagation_delays(instance.A, instance.B), instance.state_nodes, instance.input_nodes, n)
     M = _min_plus(_min_plus(D, p), D)
     bad = D > M
     count = int(bad.sum())
@@ -187,6 +187,13 @@ def is_quadratically_invariant(instance, comm_adj, *, speed: float = 1, act_dela
         "violate controller delay <= propagation delay through the loop"
     )
     return QIResult(False, (k, l), reason, count, t_out, int(M[k, l]), (i, j))
+
+
+def _by_node(delays: np.ndarray, row_nodes, col_nodes, nodes: int) -> np.ndarray:
+    """Node-level delays: the first tap at which any state of node i feels any input of node j."""
+    out = np.full((nodes, nodes), np.inf)
+    np.minimum.at(out, (np.asarray(row_nodes)[:, None], np.asarray(col_nodes)[None, :]), delays)
+    return out
 
 
 def _min_plus(X: np.ndarray, Y: np.ndarray) -> np.ndarray:

@@ -66,7 +66,7 @@ def topology(instance, name: str) -> np.ndarray:
     ``"given"`` (the instance's graph), ``"plant"`` (support of A or B),
     ``"given^k"`` / ``"plant^k"`` (k-hop closures), ``"complete"``.
     """
-    n = instance.n
+    n = instance.nodes
     if name == "complete":
         return np.ones((n, n))
     match = _GRAPH_NAME.match(name) if isinstance(name, str) else None
@@ -101,9 +101,9 @@ class SLSController:
     def __init__(self, phi_x, phi_u):
         phi_x = np.array(phi_x, dtype=float)
         phi_u = np.array(phi_u, dtype=float)
-        if phi_u.ndim != 3 or phi_u.shape[1] != phi_u.shape[2] or phi_u.shape[0] < 1:
-            raise ValueError(f"phi_u must have shape (K, n, n) with K >= 1, got {phi_u.shape}")
-        K, n, _ = phi_u.shape
+        if phi_u.ndim != 3 or phi_u.shape[0] < 1:
+            raise ValueError(f"phi_u must have shape (K, m, n) with K >= 1, got {phi_u.shape}")
+        K, _, n = phi_u.shape
         if phi_x.shape != (K + 1, n, n):
             raise ValueError(f"phi_x must have shape {(K + 1, n, n)} to match phi_u, got {phi_x.shape}")
         for M in (phi_x, phi_u):
@@ -116,7 +116,8 @@ class SLSController:
 
     @property
     def n(self) -> int:
-        return self.phi_u.shape[1]
+        """States."""
+        return self.phi_u.shape[2]
 
     @property
     def length(self) -> int:
@@ -143,8 +144,15 @@ class SLSController:
 
     @property
     def support(self) -> np.ndarray:
-        """Union of the supports of all taps: who uses whose information."""
-        return np.any(self.phi_u != 0, axis=0) | np.any(self.phi_x[1:] != 0, axis=0)
+        """Union of the supports of all taps: who uses whose information.
+
+        Square when each node has one state and one input; otherwise the inputs'
+        taps only, (m, n), which :meth:`codesign.Instance.node_support` maps to nodes.
+        """
+        used = np.any(self.phi_u != 0, axis=0)
+        if used.shape[0] != used.shape[1]:
+            return used
+        return used | np.any(self.phi_x[1:] != 0, axis=0)
 
     def closed_loop_responses(self, instance, steps: int | None = None):
         """Maps ``(phi_x, phi_u)`` of this controller in closed loop with the instance.
@@ -177,14 +185,16 @@ def _solve_qp(instance, dist, T, *, speed, act_delay, fir):
     import cvxpy as cp  # imported on use: cvxpy takes about a second to import
     import scipy.sparse as sp
 
-    n = instance.n
+    n, m = instance.n, instance.m
     nn = n * n
-    # Column-major vec: entry (i, j) of a map sits at j*n + i and vec(A M) = (I ⊗ A) vec(M).
-    dist_vec = dist.ravel(order="F")
-    x_masks = [dist_vec <= support_hops(t + 1, speed=speed, act_delay=act_delay) for t in range(1, T + 1)]
+    # Column-major vec: entry (i, j) of a map sits at j*rows + i and vec(A M) = (I ⊗ A) vec(M).
+    # Supports are by hop distance between the nodes that own a map's row and column.
+    x_dist = dist[np.ix_(instance.state_nodes, instance.state_nodes)].ravel(order="F")
+    u_dist = dist[np.ix_(instance.input_nodes, instance.state_nodes)].ravel(order="F")
+    x_masks = [x_dist <= support_hops(t + 1, speed=speed, act_delay=act_delay) for t in range(1, T + 1)]
     if fir:
         x_masks[-1] = np.zeros(nn, dtype=bool)  # X[F] = 0
-    u_masks = [dist_vec <= support_hops(t + 1, speed=speed, act_delay=act_delay) for t in range(T)]
+    u_masks = [u_dist <= support_hops(t + 1, speed=speed, act_delay=act_delay) for t in range(T)]
     keep = np.concatenate(x_masks + u_masks)
 
     eye_n = sp.identity(n, format="csr")
@@ -230,7 +240,7 @@ def _solve_qp(instance, dist, T, *, speed, act_delay, fir):
     X = np.empty((T + 1, n, n))
     X[0] = np.eye(n)
     X[1:] = value[: T * nn].reshape(T, n, n).transpose(0, 2, 1)
-    U = value[T * nn:].reshape(T, n, n).transpose(0, 2, 1)
+    U = value[T * nn:].reshape(T, n, m).transpose(0, 2, 1)
     return X, U, info
 
 
@@ -248,7 +258,7 @@ def _realized_objective(instance, controller, T: int) -> float:
 
 
 # -- the method ------------------------------------------------------------------------
-@method("sls", label="SLS (delay constraints)")
+@method("sls", label="SLS (delay constraints)", node_blocks=True)
 def sls(
     instance,
     *,
@@ -310,9 +320,10 @@ def sls(
     else:
         name = "custom"
         adj = np.asarray(comm_adj, dtype=float)
-        if adj.shape != (instance.n, instance.n):
-            raise ValueError(f"comm_adj must have shape {(instance.n, instance.n)}, got {adj.shape}")
-        adj = ((adj != 0) | np.eye(instance.n, dtype=bool)).astype(float)
+        N = instance.nodes
+        if adj.shape != (N, N):
+            raise ValueError(f"comm_adj must have shape {(N, N)} (one row per node), got {adj.shape}")
+        adj = ((adj != 0) | np.eye(N, dtype=bool)).astype(float)
     T = int(fir if fir is not None else (horizon if horizon is not None else instance.horizon))
     params = {
         "graph": name,
@@ -387,7 +398,7 @@ def sls(
     )
 
 
-@method("sls_topologies", label="SLS (topology family)")
+@method("sls_topologies", label="SLS (topology family)", node_blocks=True)
 def sls_topologies(
     instance,
     *,

@@ -200,8 +200,22 @@ def test_exact_and_simulated_costs_agree_for_a_block_sparse_gain(chain):
     assert count_links(chain.node_support(K)) == (3, 8)
 
 
+def test_sls_on_node_blocks(chain):
+    """Unconstrained SLS (complete graph, no delay, fast relay) is LQR; delays cost; the given chain is not QI."""
+    sls = get_method("sls")
+    (free,) = sls(chain, graph="complete", act_delay=0, speed=10.0, horizon=20)
+    assert free.status == "optimal" and abs(free.cost - 1.0) < 1e-6
+    (plant,) = sls(chain, graph="plant", horizon=20)
+    assert plant.status == "optimal" and plant.extras["qi"] and plant.cost > 1.0 + 1e-4
+    assert (plant.links, plant.self_loops) == count_links(chain.plant_adj)
+    check = compare_exact_and_simulated(chain, plant.controller)
+    assert abs(check["z"]) < 3 and abs(check["control_variate"] - plant.cost) < 1e-9
+    (given,) = sls(chain, graph="given")
+    assert given.status == "infeasible" and not given.extras["qi"]
+
+
 def test_methods_without_node_blocks_record_a_failure(chain):
-    for name in ("sparse_admm", "sls", "grnn_sparse", "gcnn"):
+    for name in ("sparse_admm", "grnn_sparse", "gcnn"):
         (design,) = get_method(name)(chain)
         assert design.status == "failed" and "several states or inputs" in design.message
 

@@ -40,11 +40,13 @@ def check_gammas(gammas) -> np.ndarray:
     return np.sort(values)
 
 
-def pattern_of(K) -> np.ndarray:
-    """Free entries for polishing: the nonzeros of K plus the whole diagonal."""
+def pattern_of(K, instance=None) -> np.ndarray:
+    """Free entries for polishing: the nonzeros of K plus the diagonal (each node's own block)."""
     mask = np.asarray(K) != 0
-    np.fill_diagonal(mask, True)
-    return mask
+    if instance is None or instance.scalar_nodes:
+        np.fill_diagonal(mask, True)
+        return mask
+    return mask | instance.block_mask()
 
 
 def masked_grad_norm(instance, K, mask) -> tuple[float, float]:
@@ -81,7 +83,7 @@ def gain_design(instance, method: str, params: dict, K, *, seconds: float, extra
     """
     K = np.asarray(K, dtype=float)
     radius = spectral_radius(instance.A + instance.B @ K)
-    links, self_loops = count_links(K)
+    links, self_loops = count_links(instance.node_support(K))
     extras = {**extras, "spectral_radius": radius}
     if not radius < 1.0:
         return Design.failure(method, params, "diverged",
@@ -123,8 +125,8 @@ def design_on_pattern(instance, method: str, params: dict, K, *, extras: dict, p
     A diagonal pattern is the decentralized design, taken from
     :func:`baselines.decentralized` when that one stabilizes.
     """
-    mask = pattern_of(K)
-    if not (mask & ~np.eye(instance.n, dtype=bool)).any():
+    mask = pattern_of(K, instance)
+    if not (mask & ~instance.block_mask()).any():
         diagonal = decentral.usable()
         if diagonal is not None:
             return as_path_point(diagonal, method, params, {**extras, "decentralized": True})

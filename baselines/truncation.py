@@ -21,22 +21,38 @@ from ._sparse import DecentralizedCache, design_on_pattern
 __all__ = ["truncated_lqr", "truncation_mask"]
 
 
-def truncation_mask(K, links: int) -> np.ndarray:
-    """The diagonal plus the ``links`` largest off-diagonal |K_ij| (ties broken by position)."""
+def truncation_mask(K, links: int, instance=None) -> np.ndarray:
+    """The diagonal plus the ``links`` largest off-diagonal |K_ij| (ties broken by position).
+
+    With an ``instance`` whose nodes hold several states or inputs, entries are node
+    blocks: each node's own block plus the ``links`` off-diagonal blocks of largest
+    Frobenius norm.
+    """
     K = np.asarray(K, dtype=float)
-    n = K.shape[0]
+    blocks = instance is not None and not instance.scalar_nodes
+    if blocks:
+        rows = np.zeros((instance.nodes, instance.m))
+        rows[instance.input_nodes, np.arange(instance.m)] = 1.0
+        cols = np.zeros((instance.nodes, instance.n))
+        cols[instance.state_nodes, np.arange(instance.n)] = 1.0
+        size = np.sqrt(rows @ K**2 @ cols.T)
+    else:
+        size = np.abs(K)
+    n = size.shape[0]
     off = ~np.eye(n, dtype=bool)
     if not 0 <= links <= int(off.sum()):
         raise ValueError(f"links must be between 0 and {int(off.sum())}, got {links}")
-    order = np.argsort(-np.abs(K[off]), kind="stable")[:links]
+    order = np.argsort(-size[off], kind="stable")[:links]
     kept = np.zeros(int(off.sum()), dtype=bool)
     kept[order] = True
     mask = np.eye(n, dtype=bool)
     mask[off] = kept
+    if blocks:
+        return mask[np.ix_(instance.input_nodes, instance.state_nodes)]
     return mask
 
 
-@method("truncated_lqr", label="Truncated LQR K")
+@method("truncated_lqr", label="Truncated LQR K", node_blocks=True)
 def truncated_lqr(instance, *, links: list | None = None, polish: bool = True) -> list[Design]:
     """Sparse static gains by truncating the LQR gain to ``links`` off-diagonal entries, then polishing.
 
@@ -56,7 +72,7 @@ def truncated_lqr(instance, *, links: list | None = None, polish: bool = True) -
         ``instantaneous``. A truncated gain that does not stabilize after polishing
         is recorded as ``diverged``.
     """
-    n = instance.n
+    n = instance.nodes
     most = n * (n - 1)
     if links is None:
         links = sorted({int(round(x)) for x in np.geomspace(1, most, 10)} | {0}, reverse=True)
@@ -70,7 +86,7 @@ def truncated_lqr(instance, *, links: list | None = None, polish: bool = True) -
     for count in counts:
         params = {"links": count}
         with Timer() as timer:
-            K = np.where(truncation_mask(instance.K_lqr, count), instance.K_lqr, 0.0)
+            K = np.where(truncation_mask(instance.K_lqr, count, instance), instance.K_lqr, 0.0)
             design = design_on_pattern(instance, "truncated_lqr", params, K, extras={"solver": "truncation"},
                                        polish=polish, decentral=decentral)
         designs.append(replace(design, seconds=float(timer.seconds)))

@@ -214,6 +214,21 @@ def test_sls_on_node_blocks(chain):
     assert given.status == "infeasible" and not given.extras["qi"]
 
 
+def test_truncation_keeps_node_blocks_and_polishes_them(chain):
+    from baselines._sparse import GRAD_RTOL, pattern_of
+    from codesign import static_gain_cost_and_grad
+
+    designs = get_method("truncated_lqr")(chain, links=[56, 9, 2, 0])
+    assert [d.links for d in designs] == [56, 9, 2, 0] and all(d.self_loops == 8 for d in designs)
+    for d in designs:
+        assert d.status == "optimal", d.message
+        K = np.asarray(d.controller.K)
+        cost, grad = static_gain_cost_and_grad(chain, K)
+        assert np.linalg.norm(grad[pattern_of(K, chain)]) < GRAD_RTOL * cost
+    assert abs(designs[0].cost - 1.0) < 1e-9
+    assert designs[-1].cost == pytest.approx(get_method("decentralized")(chain)[0].cost, rel=1e-9)
+
+
 def test_methods_without_node_blocks_record_a_failure(chain):
     for name in ("sparse_admm", "grnn_sparse", "gcnn"):
         (design,) = get_method(name)(chain)

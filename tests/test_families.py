@@ -229,8 +229,24 @@ def test_truncation_keeps_node_blocks_and_polishes_them(chain):
     assert designs[-1].cost == pytest.approx(get_method("decentralized")(chain)[0].cost, rel=1e-9)
 
 
+def test_admm_path_on_node_blocks_runs_from_dense_to_no_links(chain):
+    """The group (block Frobenius) penalty: whole node blocks leave the gain together."""
+    from baselines._sparse import GRAD_RTOL, pattern_of
+    from codesign import static_gain_cost_and_grad
+
+    designs = get_method("sparse_admm")(chain, gammas=[1e-9, 1e-5, 1e-3, 1e-1])
+    links = [d.links for d in designs]
+    assert links[0] >= 50 and links[-1] == 0 and links == sorted(links, reverse=True)
+    for d in designs:
+        assert d.status == "optimal" and d.self_loops == 8, d.message
+        K = np.asarray(d.controller.K)
+        cost, grad = static_gain_cost_and_grad(chain, K)
+        assert np.linalg.norm(grad[pattern_of(K, chain)]) < GRAD_RTOL * cost
+        assert d.links == count_links(chain.node_support(K))[0]
+
+
 def test_methods_without_node_blocks_record_a_failure(chain):
-    for name in ("sparse_admm", "grnn_sparse", "gcnn"):
+    for name in ("sparse_sdp", "sparse_delayed", "grnn_sparse", "gcnn"):
         (design,) = get_method(name)(chain)
         assert design.status == "failed" and "several states or inputs" in design.message
 
@@ -238,9 +254,11 @@ def test_methods_without_node_blocks_record_a_failure(chain):
 def test_a_mass_spring_experiment_runs_end_to_end(tmp_path):
     (tmp_path / "chain.toml").write_text(
         'name = "chain"\n[instances]\nfamily = "mass_spring"\nn = [6]\nseeds = 2\nhorizon = 20\n'
-        '[[methods]]\nmethod = "lqr"\n[[methods]]\nmethod = "decentralized"\n[[methods]]\nmethod = "sparse_admm"\n')
+        '[[methods]]\nmethod = "lqr"\n[[methods]]\nmethod = "sparse_admm"\ngrid = { gammas = [[1e-5, 1e-2]] }\n'
+        '[[methods]]\nmethod = "gcnn"\n')
     result = _run(tmp_path / "chain.toml", tmp_path / "out")
     assert result.exit_code == 0, result.output
+    # gcnn does not handle node blocks yet: a recorded failure per instance, not a crash.
     assert "6 runs: 6 computed" in result.output and "2 failed" in result.output
     assert "mass_spring, N = 6" in (tmp_path / "out" / "report.md").read_text()
 

@@ -46,7 +46,7 @@ def _run(spec, out):
 
 
 def test_builtin_families_are_listed():
-    assert {"paper", "matrices", "mass_spring"} <= set(family_names())
+    assert {"paper", "matrices", "mass_spring", "random_network"} <= set(family_names())
 
 
 def test_systems_from_files_run_end_to_end_and_edits_rerun_only_that_file(tmp_path):
@@ -118,7 +118,7 @@ def test_a_file_that_is_not_npz_is_named(tmp_path):
     ('family = "matrices"\nfiles = ["nothing*.npz"]', "instances.files[0]: no file matches"),
     ('family = "matrices"', "instances.files: required"),
     ('family = "matrices"\nfiles = ["x.npz"]\nseeds = 3', "instances.seeds: unknown key (allowed: family, files)"),
-    ('family = "mass_sprung"', "instances.family: unknown family 'mass_sprung' (known: mass_spring, matrices, paper"),
+    ('family = "mass_sprung"', "instances.family: unknown family 'mass_sprung' (known: mass_spring, matrices, paper, random_network"),
     ('family = "paper"\nfiles = ["x.npz"]', "instances.files: unknown key"),
 ])
 def test_instance_keys_are_validated_per_family(tmp_path, instances, message):
@@ -169,7 +169,8 @@ def test_mass_spring_nodes_hold_a_position_and_a_velocity(chain):
     np.testing.assert_array_equal(chain.state_nodes, np.r_[np.arange(8), np.arange(8)])
     chain_graph = np.eye(8) + np.eye(8, k=1) + np.eye(8, k=-1)
     np.testing.assert_array_equal(chain.comm_adj, chain_graph)
-    assert chain.spec == {"family": "mass_spring", "n": 8, "seed": 0, "dt": 0.2, "horizon": 50, "r": 1.0}
+    assert chain.spec == {"family": "mass_spring", "n": 8, "seed": 0, "dt": 0.2, "horizon": 50, "r": 10.0}
+    np.testing.assert_array_equal(chain.R, 10.0 * np.eye(8))  # lqrsp's example: Q = I, R = 10 I
     assert mass_spring_instance(8, seed=1).A.tolist() != chain.A.tolist()
 
 
@@ -273,3 +274,22 @@ def test_node_maps_are_validated_by_name():
         Instance.from_matrices(A, B, state_nodes=[0, 0, 1, 1], input_nodes=[0, 5])
     inst = Instance.from_matrices(A, B, state_nodes=[0, 0, 1, 1], input_nodes=[0, 1])
     assert (inst.nodes, inst.n, inst.m) == (2, 4, 2) and inst.comm_adj.shape == (2, 2)
+
+
+def test_random_network_follows_the_lqrsp_example():
+    from compare.families.random_network import random_network_instance
+
+    net = random_network_instance(12, seed=1)
+    assert (net.n, net.m, net.nodes) == (24, 12, 12)
+    np.testing.assert_array_equal(net.state_nodes, np.repeat(np.arange(12), 2))
+    assert count_links(net.plant_adj) == (132, 12)  # every pair is coupled
+    comm = net.comm_adj != 0
+    assert np.array_equal(comm, comm.T) and all(comm[i].sum() - 1 >= 4 for i in range(12))
+    assert net.open_loop_radius > 1  # unstable nodes
+    assert abs(get_method("lqr")(net)[0].cost - 1.0) < 1e-9
+    local = get_method("decentralized")(net)[0]
+    assert local.status == "optimal" and local.links == 0 and local.cost > 1.0
+    assert random_network_instance(12, seed=2).A.tolist() != net.A.tolist()
+    spec = parse_spec('name = "r"\n[instances]\nfamily = "random_network"\nn = [12]\nseeds = 2\n'
+                      '[[methods]]\nmethod = "lqr"\n')
+    assert [r.instance["seed"] for r in spec.runs()] == [0, 1] and spec.runs()[0].instance["side"] == np.sqrt(12)

@@ -26,7 +26,7 @@ __all__ = ["Family", "register_family", "get_family", "family_names", "UnknownFa
 
 #: Modules of the built-in families, imported on first use.
 _BUILTIN = {"paper": "compare.families.paper", "matrices": "compare.families.matrices",
-            "mass_spring": "compare.families.mass_spring"}
+            "mass_spring": "compare.families.mass_spring", "random_network": "compare.families.random_network"}
 _FAMILIES: dict[str, "Family"] = {}
 
 

@@ -12,8 +12,8 @@ with T tridiagonal (2 on the diagonal, -1 beside it), states ordered as in the
 example, all positions then all velocities (``state_nodes = [0..N-1, 0..N-1]``).
 They are discretized by zero-order hold with sampling time ``dt``
 (:func:`scipy.signal.cont2discrete`); a ``seed`` draws masses and stiffnesses
-uniformly in [0.5, 1.5] instead. Costs: Q = I (every position and velocity) and
-R = r I, horizon T steps, terminal cost the DARE solution as for every instance.
+uniformly in [0.5, 1.5] instead. Costs as in the example: Q = I (every position and
+velocity) and R = r I with r = 10, horizon T steps, terminal cost the DARE solution as for every instance.
 The given communication graph is the chain: each node talks to its two
 neighbours.
 
@@ -32,7 +32,7 @@ Spec::
     seeds = 0         # 0: unit masses and springs; k: seeds 1..k draw them around 1
     dt = 0.2          # sampling time
     horizon = 50
-    r = 1.0           # R = r I
+    r = 10.0          # R = r I (the example's weight)
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ KEYS = {"family", "n", "seeds", "dt", "horizon", "r"}
 CUTOFF = 1e-9
 
 
-def mass_spring_instance(n: int, *, seed: int = 0, dt: float = 0.2, horizon: int = 50, r: float = 1.0):
+def mass_spring_instance(n: int, *, seed: int = 0, dt: float = 0.2, horizon: int = 50, r: float = 10.0):
     """The chain of ``n`` masses as an :class:`codesign.Instance` (seed 0: unit masses and springs)."""
     from scipy.signal import cont2discrete
 
@@ -89,7 +89,7 @@ def parse(table: dict, base=None) -> tuple:
         raise SpecError(f"instances.seeds: must be >= 0, got {count}")
     dt = _typed("instances.dt", table.get("dt", 0.2), float)
     horizon = _typed("instances.horizon", table.get("horizon", 50), int)
-    r = _typed("instances.r", table.get("r", 1.0), float)
+    r = _typed("instances.r", table.get("r", 10.0), float)
     for key, value in (("dt", dt), ("r", r)):
         if not value > 0:
             raise SpecError(f"instances.{key}: must be positive, got {value}")

@@ -24,7 +24,7 @@ PRESET_TIMES = {
     "sls-small": "~1 min (estimated from its size, not measured)",
     "table1-small": "~1-2 min (estimated from table1's per-run times, not measured)",
     "table1": "~31 min (1871 s measured)",
-    "tradeoff": "~70 min (estimated from its size, not yet measured)",
+    "tradeoff": "~82 min (4909 s measured)",
 }
 
 

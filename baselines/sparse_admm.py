@@ -147,30 +147,12 @@ def _offdiag_ones(n):
     return W
 
 
-class _Blocks:
-    """Node blocks of a gain (node i's inputs by node j's states) for the group penalty."""
-
-    def __init__(self, instance):
-        self.rows = np.zeros((instance.nodes, instance.m))
-        self.rows[instance.input_nodes, np.arange(instance.m)] = 1.0
-        self.cols = np.zeros((instance.nodes, instance.n))
-        self.cols[instance.state_nodes, np.arange(instance.n)] = 1.0
-        self.inputs, self.states = instance.input_nodes, instance.state_nodes
-
-    def norms(self, V) -> np.ndarray:
-        """(N, N) Frobenius norms of the blocks of V (m, n)."""
-        return np.sqrt(self.rows @ (V * V) @ self.cols.T)
-
-    def expand(self, node_values) -> np.ndarray:
-        """An (N, N) array repeated over each block's entries, (m, n)."""
-        return node_values[np.ix_(self.inputs, self.states)]
-
-    def shrink(self, V, threshold) -> np.ndarray:
-        """Weighted group soft-threshold; ``threshold`` (N, N) is zero on each node's own block."""
-        norms = self.norms(V)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            factor = np.where(norms > threshold, 1.0 - threshold / norms, 0.0)
-        return V * self.expand(factor)
+def _group_shrink(instance, V, threshold):
+    """Weighted group soft-threshold of the node blocks; ``threshold`` (N, N) is zero on each node's own block."""
+    norms = instance.block_norms(V)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        factor = np.where(norms > threshold, 1.0 - threshold / norms, 0.0)
+    return V * instance.expand_blocks(factor)
 
 
 def admm_gamma_max(instance) -> float:
@@ -190,7 +172,7 @@ def admm_gamma_max(instance) -> float:
         grad = point.grad.copy()
         np.fill_diagonal(grad, 0.0)
         return float(np.max(np.abs(grad))) / instance.trace_P
-    norms = _Blocks(instance).norms(point.grad)
+    norms = instance.block_norms(point.grad)
     np.fill_diagonal(norms, 0.0)
     return float(np.max(norms)) / instance.trace_P
 
@@ -268,7 +250,7 @@ def sparse_admm(
     on 3 of 60 (other instances), by 1.4e-4 to 3.7e-3.
     """
     n, m, N = instance.n, instance.m, instance.nodes
-    blocks = None if instance.scalar_nodes else _Blocks(instance)
+    blocks = not instance.scalar_nodes
     gammas = check_gammas(ADMM_GAMMAS if gammas is None else gammas)
     for label, value in (("rho", rho), ("eps_weight", eps_weight), ("tol", tol), ("kstep_tol", kstep_tol)):
         if not (np.isfinite(value) and value > 0):
@@ -307,7 +289,7 @@ def sparse_admm(
                 admm_iters += its
                 kstep_iters += kits
                 converged &= ok
-                W_new = 1.0 / ((np.abs(G) if blocks is None else blocks.norms(G)) + eps_weight)
+                W_new = 1.0 / ((instance.block_norms(G) if blocks else np.abs(G)) + eps_weight)
                 np.fill_diagonal(W_new, 0.0)
                 settled = np.linalg.norm(W_new - W) < _WEIGHTS_SETTLED * np.linalg.norm(W)
                 W = W_new
@@ -337,7 +319,7 @@ def sparse_admm(
     return with_diagonal_end(designs, "sparse_admm", base, decentral) if diagonal_end else designs
 
 
-def _admm(instance, point, G, Lam, threshold, rho, *, tol, kstep_tol, maxiter, blocks=None):
+def _admm(instance, point, G, Lam, threshold, rho, *, tol, kstep_tol, maxiter, blocks=False):
     """ADMM on K = G from a warm start; returns (point, G, Lam, iterations, K-step iterations, converged).
 
     Stops on lqrsp's primal/dual residual test with absolute tolerance ``tol``
@@ -350,7 +332,7 @@ def _admm(instance, point, G, Lam, threshold, rho, *, tol, kstep_tol, maxiter, b
         kstep_iters += its
         K = point.K
         V = K + Lam / rho
-        G_new = _shrink(V, threshold) if blocks is None else blocks.shrink(V, threshold)
+        G_new = _group_shrink(instance, V, threshold) if blocks else _shrink(V, threshold)
         dual = rho * np.linalg.norm(G_new - G)
         G = G_new
         primal = np.linalg.norm(K - G)

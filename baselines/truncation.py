@@ -30,14 +30,7 @@ def truncation_mask(K, links: int, instance=None) -> np.ndarray:
     """
     K = np.asarray(K, dtype=float)
     blocks = instance is not None and not instance.scalar_nodes
-    if blocks:
-        rows = np.zeros((instance.nodes, instance.m))
-        rows[instance.input_nodes, np.arange(instance.m)] = 1.0
-        cols = np.zeros((instance.nodes, instance.n))
-        cols[instance.state_nodes, np.arange(instance.n)] = 1.0
-        size = np.sqrt(rows @ K**2 @ cols.T)
-    else:
-        size = np.abs(K)
+    size = instance.block_norms(K) if blocks else np.abs(K)
     n = size.shape[0]
     off = ~np.eye(n, dtype=bool)
     if not 0 <= links <= int(off.sum()):
@@ -47,9 +40,7 @@ def truncation_mask(K, links: int, instance=None) -> np.ndarray:
     kept[order] = True
     mask = np.eye(n, dtype=bool)
     mask[off] = kept
-    if blocks:
-        return mask[np.ix_(instance.input_nodes, instance.state_nodes)]
-    return mask
+    return instance.expand_blocks(mask) if blocks else mask
 
 
 @method("truncated_lqr", label="Truncated LQR K", node_blocks=True)

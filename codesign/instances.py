@@ -225,6 +225,15 @@ class Instance:
         """(m, n) mask of the gain entries from a node's own states to its own inputs (decentralized)."""
         return self.input_nodes[:, None] == self.state_nodes[None, :]
 
+    def block_norms(self, K) -> np.ndarray:
+        """(N, N) Frobenius norms of the node blocks of a gain K (m, n): node i's inputs by node j's states."""
+        K = np.asarray(K, dtype=float)
+        return np.sqrt(_one_hot(self.input_nodes, self.nodes) @ (K * K) @ _one_hot(self.state_nodes, self.nodes).T)
+
+    def expand_blocks(self, node_values) -> np.ndarray:
+        """An (N, N) array repeated over the entries of each node block, as an (m, n) gain-shaped array."""
+        return np.asarray(node_values)[np.ix_(self.input_nodes, self.state_nodes)]
+
     @property
     def seed(self) -> int:
         """The generator seed, or 0 for user-supplied matrices."""
@@ -292,13 +301,17 @@ def _node_maps(n: int, m: int, state_nodes, input_nodes) -> tuple[np.ndarray, np
     return sn, un
 
 
+def _one_hot(owners, nodes: int) -> np.ndarray:
+    """(N, len(owners)) matrix with a 1 where entry k belongs to node ``owners[k]``."""
+    out = np.zeros((nodes, len(owners)))
+    out[owners, np.arange(len(owners))] = 1.0
+    return out
+
+
 def _node_coupling(support: np.ndarray, row_nodes, col_nodes, nodes: int) -> np.ndarray:
     """(N, N) 0/1 matrix: 1 where some row of node i and column of node j are coupled in ``support``."""
-    rows = np.zeros((nodes, support.shape[0]))
-    rows[row_nodes, np.arange(support.shape[0])] = 1.0
-    cols = np.zeros((nodes, support.shape[1]))
-    cols[col_nodes, np.arange(support.shape[1])] = 1.0
-    return ((rows @ support.astype(float) @ cols.T) != 0).astype(float)
+    coupled = _one_hot(row_nodes, nodes) @ support.astype(float) @ _one_hot(col_nodes, nodes).T
+    return (coupled != 0).astype(float)
 
 
 def _as_matrix(label: str, value) -> np.ndarray:

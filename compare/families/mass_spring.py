@@ -37,22 +37,21 @@ Spec::
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from ..spec import SpecError, _check_keys, _list_of, _typed
+from ..spec import SpecError, _check_keys, _typed
 from . import Family, register_family
+from ._sampled import parse_sampling, zoh
 
 __all__ = ["mass_spring_instance"]
 
 KEYS = {"family", "n", "seeds", "dt", "horizon", "r"}
-#: Relative size below which entries of the discretized A and B are dropped (see the module docstring).
-CUTOFF = 1e-9
 
 
 def mass_spring_instance(n: int, *, seed: int = 0, dt: float = 0.2, horizon: int = 50, r: float = 10.0):
     """The chain of ``n`` masses as an :class:`codesign.Instance` (seed 0: unit masses and springs)."""
-    from scipy.signal import cont2discrete
-
     from codesign import Instance
 
     if seed:
@@ -65,36 +64,25 @@ def mass_spring_instance(n: int, *, seed: int = 0, dt: float = 0.2, horizon: int
     zero, eye = np.zeros((n, n)), np.eye(n)
     Ac = np.block([[zero, eye], [-inv_mass @ stiffness, zero]])
     Bc = np.vstack([zero, inv_mass])
-    A, B, *_ = cont2discrete((Ac, Bc, np.eye(2 * n), np.zeros((2 * n, n))), dt, method="zoh")
-    A = np.where(np.abs(A) >= CUTOFF * np.abs(A).max(), A, 0.0)
-    B = np.where(np.abs(B) >= CUTOFF * np.abs(B).max(), B, 0.0)
+    A, B = zoh(Ac, Bc, dt)
     chain = np.eye(n) + np.eye(n, k=1) + np.eye(n, k=-1)
     nodes = np.concatenate([np.arange(n), np.arange(n)])
     inst = Instance.from_matrices(A, B, R=r * np.eye(n), comm_adj=chain, horizon=horizon,
                                   state_nodes=nodes, input_nodes=np.arange(n))
     spec = {"family": "mass_spring", "n": n, "seed": int(seed), "dt": float(dt), "horizon": int(horizon),
             "r": float(r)}
-    from dataclasses import replace
-
     return replace(inst, spec=spec)
 
 
 def parse(table: dict, base=None) -> tuple:
     _check_keys("instances", table, KEYS)
-    sizes = _list_of("instances.n", table.get("n", [20]), int)
-    if any(n < 2 for n in sizes):
-        raise SpecError(f"instances.n: at least 2 masses, got {list(sizes)}")
+    sizes, dt, horizon = parse_sampling(table, noun="masses", dt=0.2)
     count = _typed("instances.seeds", table.get("seeds", 0), int)
     if count < 0:
         raise SpecError(f"instances.seeds: must be >= 0, got {count}")
-    dt = _typed("instances.dt", table.get("dt", 0.2), float)
-    horizon = _typed("instances.horizon", table.get("horizon", 50), int)
     r = _typed("instances.r", table.get("r", 10.0), float)
-    for key, value in (("dt", dt), ("r", r)):
-        if not value > 0:
-            raise SpecError(f"instances.{key}: must be positive, got {value}")
-    if horizon < 1:
-        raise SpecError(f"instances.horizon: must be >= 1, got {horizon}")
+    if not r > 0:
+        raise SpecError(f"instances.r: must be positive, got {r}")
     seeds = [0] if count == 0 else list(range(1, count + 1))
     return tuple({"family": "mass_spring", "n": n, "seed": seed, "dt": dt, "horizon": horizon, "r": r}
                  for n in sizes for seed in seeds)

@@ -34,24 +34,23 @@ Spec::
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from ..spec import SpecError, _check_keys, _list_of, _typed
+from ..spec import SpecError, _check_keys, _typed
 from . import Family, register_family
+from ._sampled import parse_sampling, zoh
 
 __all__ = ["random_network_instance"]
 
 KEYS = {"family", "n", "seeds", "dt", "horizon", "neighbours", "side"}
-CUTOFF = 1e-9
 _SALT = 0x4E37
 
 
 def random_network_instance(n: int, *, seed: int = 0, dt: float = 0.1, horizon: int = 50, neighbours: int = 4,
                             side: float = 0.0):
     """One placement of ``n`` unstable second-order nodes as an :class:`codesign.Instance`."""
-    from dataclasses import replace
-
-    from scipy.signal import cont2discrete
     from scipy.spatial.distance import cdist
 
     from codesign import Instance
@@ -64,9 +63,7 @@ def random_network_instance(n: int, *, seed: int = 0, dt: float = 0.1, horizon: 
     own = np.array([[1.0, 1.0], [1.0, 2.0]])
     Ac = np.kron(coupling, np.eye(2)) + np.kron(np.eye(n), own)
     Bc = np.kron(np.eye(n), np.array([[0.0], [1.0]]))
-    A, B, *_ = cont2discrete((Ac, Bc, np.eye(2 * n), np.zeros((2 * n, n))), dt, method="zoh")
-    A = np.where(np.abs(A) >= CUTOFF * np.abs(A).max(), A, 0.0)
-    B = np.where(np.abs(B) >= CUTOFF * np.abs(B).max(), B, 0.0)
+    A, B = zoh(Ac, Bc, dt)
     order = np.argsort(distance, axis=1, kind="stable")[:, 1:neighbours + 1]
     comm = np.zeros((n, n))
     comm[np.repeat(np.arange(n), order.shape[1]), order.ravel()] = 1.0
@@ -80,20 +77,12 @@ def random_network_instance(n: int, *, seed: int = 0, dt: float = 0.1, horizon: 
 
 def parse(table: dict, base=None) -> tuple:
     _check_keys("instances", table, KEYS)
-    sizes = _list_of("instances.n", table.get("n", [20]), int)
-    if any(n < 2 for n in sizes):
-        raise SpecError(f"instances.n: at least 2 nodes, got {list(sizes)}")
+    sizes, dt, horizon = parse_sampling(table, noun="nodes", dt=0.1)
     count = _typed("instances.seeds", table.get("seeds", 1), int)
     if count < 1:
         raise SpecError(f"instances.seeds: a count must be >= 1, got {count}")
-    dt = _typed("instances.dt", table.get("dt", 0.1), float)
-    horizon = _typed("instances.horizon", table.get("horizon", 50), int)
     neighbours = _typed("instances.neighbours", table.get("neighbours", 4), int)
     side = _typed("instances.side", table.get("side", 0.0), float)
-    if not dt > 0:
-        raise SpecError(f"instances.dt: must be positive, got {dt}")
-    if horizon < 1:
-        raise SpecError(f"instances.horizon: must be >= 1, got {horizon}")
     if any(not 1 <= neighbours < n for n in sizes):
         raise SpecError(f"instances.neighbours: must be between 1 and n - 1, got {neighbours}")
     if side < 0:

@@ -8,10 +8,30 @@ per-node linear readout, no bias:
 5 * 32 + 32 = 192 parameters, S the given normalized adjacency. ``S^k x(t)`` is
 used with no delay: the controller assumes instantaneous multi-hop communication.
 
+Node blocks (nodes with several states or inputs, ``Instance.scalar_nodes``
+False): the node signal has p = (most states at a node) channels, X in R^{N x p},
+state k in channel "its rank among its node's states" of node ``state_nodes[k]``
+(nodes with fewer states are padded with zeros). Each tap maps the p channels to
+the F features and the readout maps the features to q = (most inputs at a node)
+outputs per node:
+
+    Z = sum_k S^k X H_k   (H_k in R^{p x F}),   Y = tanh(Z) W   (W in R^{F x q}),
+
+and input a is entry (input_nodes[a], its rank among its node's inputs) of Y
+(padded outputs are unused): K p F + F q parameters. With p = q = 1 this is the
+model above; the controller then keeps the shapes H (K, F), w (F,) and the
+general one stores H (K, p, F), w (F, q) and the node maps.
+
 Training (paper code): Adam, learning rate 0.01 multiplied by 0.9 every 10
 updates, coupled weight decay 2, no clipping, loss = mean raw J per batch.
-Models are trained in stacks with autograd (the model is memoryless, so the
-graph is short) and :class:`codesign.training.BatchedAdam`.
+Models are trained in stacks with :class:`codesign.training.BatchedAdam`. On the
+paper's family (one state and one input per node, Q = R = I) the gradient is the
+hand-written BPTT :func:`_loss_and_grad` (checked against the autograd reference
+:func:`_cost`), unchanged; on node blocks, or other Q and R, it is a second
+hand-written BPTT, :func:`_block_loss_and_grad` (any Q, R; the filter's linear
+part x -> S^k X folded into one matrix), checked against the autograd reference
+:func:`_block_cost`. Initialization, data and selection draws use the same
+streams on both paths.
 """
 
 from __future__ import annotations
@@ -19,11 +39,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from codesign.controllers import register_controller
 from codesign.design import Design, count_links
+from codesign.instances import node_ranks
 from codesign.evaluation import simulate, spectral_radius, validation_set
 from codesign.methods import method
 from codesign._lazy import lazy_import
@@ -38,6 +60,30 @@ GCNN_FEATURES = 32
 _DATA, _INIT, _SELECT = 21, 22, 0xC0DE
 
 
+def _channels(nodes, N: int) -> int:
+    """Most entries at one node (at least 1): the padded per-node width."""
+    nodes = np.asarray(nodes, dtype=int)
+    return max(1, int(np.bincount(nodes, minlength=N).max())) if nodes.size else 1
+
+
+def _scatter(nodes, N: int, width: int) -> np.ndarray:
+    """(len(nodes), N * width) one-hot: entry k to slot (node, rank) of the node-major layout."""
+    nodes = np.asarray(nodes, dtype=int)
+    E = np.zeros((nodes.size, N * width))
+    E[np.arange(nodes.size), nodes * width + node_ranks(nodes)] = 1.0
+    return E
+
+
+def _tap_map(S, state_nodes, taps: int, width: int) -> np.ndarray:
+    """(n, N K p) matrix L with x L = the shifted node signals (S^k X)_{i,c}, ordered (node i, tap k, channel c)."""
+    N = S.shape[0]
+    powers = [np.eye(N)]
+    for _ in range(taps - 1):
+        powers.append(S @ powers[-1])
+    E = _scatter(state_nodes, N, width).reshape(-1, N, width)  # (n, N, p)
+    return np.einsum("kij,sjc->sikc", np.stack(powers), E).reshape(E.shape[0], N * taps * width)
+
+
 @register_controller("gcnn")
 @dataclass(frozen=True, eq=False)
 class GCNNController:
@@ -46,23 +92,62 @@ class GCNNController:
     Attributes
     ----------
     S : ndarray (N, N)
-    H : ndarray (K, F)
-        Filter taps h_{f,k} (tap k, feature f).
-    w : ndarray (F,)
-        Readout weights.
+    H : ndarray (K, F), or (K, p, F) on node blocks
+        Filter taps h_{f,k} (tap k, feature f); on node blocks tap k maps the p
+        channels of a node's signal to the F features.
+    w : ndarray (F,), or (F, q) on node blocks
+        Readout weights (to the q outputs of a node).
+    state_nodes, input_nodes : ndarray of int or None
+        On node blocks (3-D H), the node of each state and input (default one per
+        node, in order); state k is channel (its rank among its node's states)
+        of its node, input a the output (its rank among its node's inputs). None
+        for the one-state-one-input model (2-D H).
     """
 
     S: np.ndarray
     H: np.ndarray
     w: np.ndarray
+    state_nodes: np.ndarray | None = None
+    input_nodes: np.ndarray | None = None
 
     def __post_init__(self):
         for name in ("S", "H", "w"):
             value = np.array(getattr(self, name), dtype=float)
             value.setflags(write=False)
             object.__setattr__(self, name, value)
-        if self.H.ndim != 2 or self.w.shape != (self.H.shape[1],):
-            raise ValueError(f"H must be (K, F) and w (F,), got {self.H.shape} and {self.w.shape}")
+        N = self.S.shape[0]
+        if self.S.shape != (N, N):
+            raise ValueError(f"S must be square, got {self.S.shape}")
+        if self.H.ndim == 2:
+            if self.w.shape != (self.H.shape[1],):
+                raise ValueError(f"H must be (K, F) and w (F,), got {self.H.shape} and {self.w.shape}")
+            for name in ("state_nodes", "input_nodes"):
+                nodes = getattr(self, name)
+                if nodes is not None and not np.array_equal(nodes, np.arange(N)):
+                    raise ValueError(f"{name} other than one per node needs the node-block shapes "
+                                     "H (K, p, F) and w (F, q)")
+                object.__setattr__(self, name, None)
+            return
+        if self.H.ndim != 3 or self.w.ndim != 2 or self.w.shape[0] != self.H.shape[2]:
+            raise ValueError(f"H must be (K, F) and w (F,), or (K, p, F) and (F, q); got {self.H.shape} "
+                             f"and {self.w.shape}")
+        for name, width in (("state_nodes", self.H.shape[1]), ("input_nodes", self.w.shape[1])):
+            nodes = np.arange(N) if getattr(self, name) is None else np.array(getattr(self, name))
+            if nodes.ndim != 1 or not (nodes.size == 0 or np.issubdtype(nodes.dtype, np.integer)):
+                raise ValueError(f"{name} must be a 1-D array of node numbers, got {nodes!r}")
+            nodes = nodes.astype(int)
+            if nodes.size and (nodes.min() < 0 or nodes.max() >= N):
+                raise ValueError(f"{name} must name nodes 0..{N - 1}, got {nodes.tolist()}")
+            if nodes.size and np.bincount(nodes, minlength=N).max() > width:
+                raise ValueError(f"{name}: a node has {np.bincount(nodes).max()} entries, more than the "
+                                 f"{width} channels of H and w")
+            nodes.setflags(write=False)
+            object.__setattr__(self, name, nodes)
+
+    @property
+    def blocks(self) -> bool:
+        """Whether this is the node-block form (3-D H)."""
+        return self.H.ndim == 3
 
     @property
     def n_parameters(self) -> int:
@@ -72,6 +157,8 @@ class GCNNController:
         return None
 
     def step(self, state, x):
+        if self.blocks:
+            return self._step_blocks(x), None
         powers = [x]
         for _ in range(self.H.shape[0] - 1):
             powers.append(powers[-1] @ self.S.T)
@@ -79,33 +166,67 @@ class GCNNController:
         # torch's tanh is twice as fast as numpy's here and agrees to the last bits.
         return torch.tanh(torch.from_numpy(z)).numpy() @ self.w, None
 
+    @cached_property
+    def _block_maps(self):
+        """(G, input nodes, input slots): z = x G (batch, N F) is the filter bank, linear in x."""
+        K, p, F = self.H.shape
+        N = self.S.shape[0]
+        L = _tap_map(self.S, self.state_nodes, K, p)  # (n, N K p)
+        G = (L.reshape(-1, N, K * p) @ self.H.reshape(K * p, F)).reshape(-1, N * F)
+        return G, self.input_nodes, node_ranks(self.input_nodes)
+
+    def _step_blocks(self, x):
+        G, nodes, slots = self._block_maps
+        N, F = self.S.shape[0], self.H.shape[2]
+        z = (np.asarray(x, dtype=float) @ G).reshape(-1, N, F)
+        y = torch.tanh(torch.from_numpy(z)).numpy() @ self.w  # (batch, N, q)
+        return y[:, nodes, slots]
+
     def arrays(self) -> dict:
-        return {"S": self.S, "H": self.H, "w": self.w}
+        arrays = {"S": self.S, "H": self.H, "w": self.w}
+        if self.blocks:
+            arrays.update(state_nodes=self.state_nodes, input_nodes=self.input_nodes)
+        return arrays
 
     @classmethod
     def from_arrays(cls, arrays: dict) -> "GCNNController":
-        return cls(arrays["S"], arrays["H"], arrays["w"])
+        return cls(arrays["S"], arrays["H"], arrays["w"], arrays.get("state_nodes"), arrays.get("input_nodes"))
 
     @property
     def support(self) -> np.ndarray:
+        """Node-level support (N, N): the given graph the filter shifts over."""
         return self.S != 0
 
     def linear_gain(self) -> np.ndarray:
-        """Gain of the controller linearized at the origin: sum_k (H_k . w) S^k."""
-        coeffs = self.H @ self.w
-        K = np.zeros_like(self.S)
+        """Gain (m, n) of the controller linearized at the origin: sum_k (H_k . w) S^k.
+
+        On node blocks, input a and state s see sum_k (S^k)_{node(a), node(s)} (H_k w)_{slot(s), slot(a)}.
+        """
+        if not self.blocks:
+            coeffs = self.H @ self.w
+            K = np.zeros_like(self.S)
+            power = np.eye(self.S.shape[0])
+            for c in coeffs:
+                K += c * power
+                power = self.S @ power
+            return K
+        coeffs = self.H @ self.w  # (K, p, q)
+        sn, ss = self.state_nodes, node_ranks(self.state_nodes)
+        un, us = self.input_nodes, node_ranks(self.input_nodes)
+        K = np.zeros((un.size, sn.size))
         power = np.eye(self.S.shape[0])
         for c in coeffs:
-            K += c * power
+            K += power[np.ix_(un, sn)] * c[ss][:, us].T
             power = self.S @ power
         return K
 
 
-def _init(rng: np.random.Generator, taps: int, features: int):
-    # torch defaults of the GS21 code: filter taps U(-1/sqrt(K), 1/sqrt(K)) (one input
-    # feature), readout nn.Linear(features, 1) U(-1/sqrt(features), 1/sqrt(features)).
-    H = rng.uniform(-1.0, 1.0, (taps, features)) / math.sqrt(taps)
-    w = rng.uniform(-1.0, 1.0, features) / math.sqrt(features)
+def _init(rng: np.random.Generator, taps: int, features: int, channels: int = 1, outputs: int = 1):
+    # torch defaults of the GS21 code: filter taps U(-1/sqrt(K G), 1/sqrt(K G)) with G input
+    # features (channels), readout nn.Linear(features, outputs) U(-1/sqrt(features), 1/sqrt(features)).
+    # With one channel and one output these are the draws of the (K, F) and (F,) shapes.
+    H = rng.uniform(-1.0, 1.0, (taps, channels, features)) / math.sqrt(taps * channels)
+    w = rng.uniform(-1.0, 1.0, (features, outputs)) / math.sqrt(features)
     return H, w
 
 
@@ -238,6 +359,104 @@ def _loss_and_grad(S, H, w, A_t, B_t, P, x0, horizon, ws: dict | None = None):
     return J / Bsz, [dHt.transpose(1, 2).contiguous(), dw.view(M, Fn)]
 
 
+def _block_cost(S, H, w, Ex, Eu, A_t, B_t, Q, R, P, x, horizon):
+    """Summed cost J (M,) of the node-block stack from x (M, B, n), plain autograd ops.
+
+    S (M, N, N); H (M, K, p, F); w (M, F, q); Ex (M, n, N p) and Eu (M, N q, m)
+    the one-hot maps from states to node channels and from node outputs to inputs
+    (node-major); A_t, B_t the transposed dynamics; any Q, R, P.
+    """
+    M, Bsz, _ = x.shape
+    N = S.shape[1]
+    K, p, Fn = H.shape[1:]
+    q = w.shape[2]
+    Hf = H.reshape(M, K * p, Fn)
+    Sb = S.unsqueeze(1)  # (M, 1, N, N), broadcast over the batch
+    J = torch.zeros(M, dtype=x.dtype)
+    for _ in range(horizon):
+        X = torch.bmm(x, Ex).view(M, Bsz, N, p)
+        powers = [X]
+        for _ in range(K - 1):
+            powers.append(torch.matmul(Sb, powers[-1]))
+        XK = torch.stack(powers, dim=3).reshape(M, Bsz * N, K * p)  # (tap, channel) as H's
+        Y = torch.bmm(torch.tanh(torch.bmm(XK, Hf)), w)  # (M, B N, q)
+        u = torch.bmm(Y.reshape(M, Bsz, N * q), Eu)
+        J = J + (torch.bmm(x, Q) * x).sum((1, 2)) + (torch.bmm(u, R) * u).sum((1, 2))
+        x = torch.bmm(x, A_t) + torch.bmm(u, B_t)
+    return J + (torch.bmm(x, P) * x).sum((1, 2))
+
+
+def _block_forward(L, H, w, Eu, A_t, B_t, Q, R, P, x0, horizon, keep: bool):
+    """Roll the node-block stack out from x0 (M, B, n); J (M,) summed over the batch.
+
+    The same model as :func:`_block_cost` with the linear part folded: x L (L from
+    :func:`_tap_map`) holds every shifted node signal. With ``keep`` the states,
+    inputs and activations are kept for :func:`_block_loss_and_grad`.
+    """
+    M, Bsz, n = x0.shape
+    K, p, Fn = H.shape[1:]
+    N = L.shape[2] // (K * p)
+    Hf = H.reshape(M, K * p, Fn)
+    X, U, Acts = [x0], [], []
+    J = torch.zeros(M, 1, 1, dtype=x0.dtype)
+    x = x0
+    for _ in range(horizon):
+        a = torch.bmm(torch.bmm(x, L).view(M, Bsz * N, K * p), Hf)
+        torch.sigmoid(a.mul_(2.0), out=a).mul_(2.0).sub_(1.0)  # tanh, 3x faster than torch.tanh on CPU
+        u = torch.bmm(torch.bmm(a, w).view(M, Bsz, -1), Eu)
+        J.baddbmm_(x.reshape(M, 1, -1), torch.bmm(x, Q).view(M, -1, 1))
+        J.baddbmm_(u.reshape(M, 1, -1), torch.bmm(u, R).view(M, -1, 1))
+        x = torch.bmm(x, A_t).baddbmm_(u, B_t)
+        if keep:
+            X.append(x), U.append(u), Acts.append(a)
+    J.baddbmm_(x.reshape(M, 1, -1), torch.bmm(x, P).view(M, -1, 1))
+    return J.view(M), (X, U, Acts)
+
+
+def _block_loss_and_grad(L, H, w, Eu, A_t, B_t, Q, R, P, x0, horizon):
+    """Per-model mean cost J / B and its gradient w.r.t. (H, w), by hand-written BPTT.
+
+    Same model as :func:`_block_cost` (the autograd reference in the tests).
+    """
+    M, Bsz, n = x0.shape
+    K, p, Fn = H.shape[1:]
+    N = L.shape[2] // (K * p)
+    J, (X, U, Acts) = _block_forward(L, H, w, Eu, A_t, B_t, Q, R, P, x0, horizon, keep=True)
+    c = 1.0 / Bsz
+    Hf = H.reshape(M, K * p, Fn)
+    Ht, wt, Lt, Eut = Hf.transpose(1, 2), w.transpose(1, 2), L.transpose(1, 2), Eu.transpose(1, 2)
+    A, Bm = A_t.transpose(1, 2), B_t.transpose(1, 2)
+    Qs, Rs, Ps = ((Z + Z.transpose(1, 2)) * c for Z in (Q, R, P))
+    lam = torch.bmm(X[horizon], Ps)  # dJ/dx(T), divided by B
+    dH = torch.zeros(M, K * p, Fn, dtype=x0.dtype)
+    dw = torch.zeros_like(w)
+    for t in range(horizon - 1, -1, -1):
+        a = Acts[t]
+        du = torch.bmm(U[t], Rs).baddbmm_(lam, Bm)
+        dy = torch.bmm(du, Eut).view(M, Bsz * N, -1)
+        dw.baddbmm_(a.transpose(1, 2), dy)
+        dz = torch.bmm(dy, wt).mul_(torch.mul(a, a).sub_(1.0)).neg_()  # tanh' = 1 - a^2
+        dH.baddbmm_(torch.bmm(X[t], L).view(M, Bsz * N, K * p).transpose(1, 2), dz)
+        if t == 0:
+            break
+        lam = torch.bmm(X[t], Qs).baddbmm_(lam, A).baddbmm_(torch.bmm(dz, Ht).view(M, Bsz, -1), Lt)
+    return J * c, [dH.view(M, K, p, Fn), dw]
+
+
+def _fast(instance) -> bool:
+    """The paper's setting, trained by the hand-written BPTT: one state and input per node, Q = R = I."""
+    return bool(instance.scalar_nodes and np.array_equal(instance.Q, np.eye(instance.n))
+                and np.array_equal(instance.R, np.eye(instance.m)))
+
+
+def _layout(instance):
+    """None on the hand-written path, else (m, N, p, q) of the node-block model (part of the stack key)."""
+    if _fast(instance):
+        return None
+    N = instance.nodes
+    return (instance.m, N, _channels(instance.state_nodes, N), _channels(instance.input_nodes, N))
+
+
 @dataclass
 class _GJob:
     instance: object
@@ -264,7 +483,7 @@ def gcnn_batch(jobs, *, stack_size: int = 64) -> list[Design]:
     for j, m in specs:
         s = parsed[j].settings
         key = (s["steps"], s["batch"], s["dtype"], s["curve_every"], s["curve_size"], parsed[j].instance.horizon,
-               parsed[j].instance.n)
+               parsed[j].instance.n, _layout(parsed[j].instance))
         groups.setdefault(key, []).append((j, m))
     trained: dict[tuple, dict] = {}
     seconds = [0.0] * len(parsed)
@@ -272,7 +491,7 @@ def gcnn_batch(jobs, *, stack_size: int = 64) -> list[Design]:
         for start in range(0, len(members), stack_size):
             chunk = members[start:start + stack_size]
             t0 = time.perf_counter()
-            out = _train([(parsed[j], m) for j, m in chunk], *key[:5])
+            out = _train([(parsed[j], m) for j, m in chunk], *key[:5], layout=key[7])
             share = (time.perf_counter() - t0) / len(chunk)
             for (j, m), result in zip(chunk, out):
                 trained[(j, m)] = result
@@ -282,12 +501,12 @@ def gcnn_batch(jobs, *, stack_size: int = 64) -> list[Design]:
 
 
 @no_grad
-def _train(members, steps, batch, dtype, curve_every, curve_size):
+def _train(members, steps, batch, dtype, curve_every, curve_size, layout=None):
     tdt = torch_dtype(dtype)
     M = len(members)
     insts = [job.instance for job, _ in members]
-    if any(not (np.array_equal(i.Q, np.eye(i.n)) and np.array_equal(i.R, np.eye(i.n))) for i in insts):
-        raise ValueError("the GCNN trainer supports Q = R = I only (the paper's family)")
+    if layout is None and not all(_fast(i) for i in insts):
+        raise ValueError("the hand-written GCNN gradient supports one state and input per node and Q = R = I only")
     horizon = insts[0].horizon
 
     def stack(arrays):
@@ -298,9 +517,37 @@ def _train(members, steps, batch, dtype, curve_every, curve_size):
     B_t = stack([i.B.T for i in insts])
     P = stack([i.P for i in insts])
     trace_P = torch.tensor([i.trace_P for i in insts], dtype=tdt)
-    inits = [_init(np.random.default_rng([job.seed, m, _INIT]), GCNN_TAPS, GCNN_FEATURES) for job, m in members]
-    H = stack([h for h, _ in inits])
-    w = stack([w for _, w in inits])
+    n = insts[0].n
+    if layout is None:
+        inits = [_init(np.random.default_rng([job.seed, m, _INIT]), GCNN_TAPS, GCNN_FEATURES) for job, m in members]
+        H = stack([h.reshape(GCNN_TAPS, GCNN_FEATURES) for h, _ in inits])
+        w = stack([w.reshape(GCNN_FEATURES) for _, w in inits])
+        ws_train = _buffers(M, batch, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=True)
+        ws_curve = _buffers(M, curve_size, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=False)
+
+        def loss_and_grad(x0):
+            return _loss_and_grad(S, H, w, A_t, B_t, P, x0, horizon, ws_train)
+
+        def rollout_cost(x0):
+            return _rollout_cost(S, H, w, A_t, B_t, P, x0, horizon, trace_P, ws_curve)
+    else:
+        _, N, p, q = layout
+        inits = [_init(np.random.default_rng([job.seed, m, _INIT]), GCNN_TAPS, GCNN_FEATURES, p, q)
+                 for job, m in members]
+        H = stack([h for h, _ in inits])
+        w = stack([w for _, w in inits])
+        L = stack([_tap_map(i.gso, i.state_nodes, GCNN_TAPS, p) for i in insts])
+        Eu = stack([_scatter(i.input_nodes, N, q).T for i in insts])
+        Q = stack([i.Q for i in insts])
+        R = stack([i.R for i in insts])
+
+        def loss_and_grad(x0):
+            return _block_loss_and_grad(L, H, w, Eu, A_t, B_t, Q, R, P, x0, horizon)
+
+        def rollout_cost(x0):
+            J, _ = _block_forward(L, H, w, Eu, A_t, B_t, Q, R, P, x0, horizon, keep=False)
+            return J / x0.shape[1] / trace_P
+
     lr0 = torch.tensor([job.settings["lr"] for job, _ in members], dtype=tdt)
     decay = torch.tensor([job.settings["decay"] for job, _ in members], dtype=tdt)
     every = members[0][0].settings["decay_every"]
@@ -312,20 +559,17 @@ def _train(members, steps, batch, dtype, curve_every, curve_size):
     diverged_at = [None] * M
     steps_rec, costs_rec = [], []
 
-    n = insts[0].n
-    ws_train = _buffers(M, batch, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=True)
-    ws_curve = _buffers(M, curve_size, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=False)
-
     def record(k):
         steps_rec.append(k)
-        costs_rec.append(_rollout_cost(S, H, w, A_t, B_t, P, curve_x0, horizon, trace_P, ws_curve))
+        costs_rec.append(rollout_cost(curve_x0))
 
     for k in range(steps):
         if curve_every and k % curve_every == 0:
             record(k)
-        x0 = stack([rng.standard_normal((batch, insts[0].n)) for rng in rngs]) * alive.view(M, 1, 1).to(tdt)
-        loss, grads = _loss_and_grad(S, H, w, A_t, B_t, P, x0, horizon, ws_train)
-        finite = torch.isfinite(loss) & torch.isfinite(grads[0].flatten(1).sum(1)) & torch.isfinite(grads[1].sum(1))
+        x0 = stack([rng.standard_normal((batch, n)) for rng in rngs]) * alive.view(M, 1, 1).to(tdt)
+        loss, grads = loss_and_grad(x0)
+        finite = (torch.isfinite(loss) & torch.isfinite(grads[0].flatten(1).sum(1))
+                  & torch.isfinite(grads[1].flatten(1).sum(1)))
         bad = alive & ~finite
         if bool(bad.any()):
             for m in torch.nonzero(bad).flatten().tolist():
@@ -347,6 +591,16 @@ def _train(members, steps, batch, dtype, curve_every, curve_size):
     ]
 
 
+def _controller(instance, r) -> GCNNController:
+    """The trained model as a controller: the (K, F), (F,) shapes whenever nodes hold one state and input."""
+    H, w = r["H"], r["w"]
+    if H.ndim == 2:
+        return GCNNController(r["S"], H, w)
+    if instance.scalar_nodes:  # p = q = 1 (e.g. trained on the autograd path for Q, R other than I)
+        return GCNNController(r["S"], H[:, 0, :], w[:, 0])
+    return GCNNController(r["S"], H, w, instance.state_nodes, instance.input_nodes)
+
+
 def _finish(job: _GJob, results, seconds) -> Design:
     finals = [r["curve"]["cost"][-1] if r["ok"] else np.inf for r in results]
     finals = [c if np.isfinite(c) else np.inf for c in finals]
@@ -359,7 +613,7 @@ def _finish(job: _GJob, results, seconds) -> Design:
                               info_model="instantaneous", seconds=seconds, links=links,
                               self_loops=self_loops, extras=extras)
     r = results[best]
-    controller = GCNNController(r["S"], r["H"], r["w"])
+    controller = _controller(job.instance, r)
     extras["curve"] = r["curve"]
     extras["n_parameters"] = controller.n_parameters
     extras["spectral_radius"] = spectral_radius(job.instance.A + job.instance.B @ controller.linear_gain())
@@ -403,12 +657,16 @@ def _check(instance, seed, s):
 
 
 # The runner hands gcnn_batch up to 25 runs at once: they train in shared stacks.
-@method("gcnn", label="GCNN", batch=gcnn_batch, batch_size=25, produces=("training_curve",))
+@method("gcnn", label="GCNN", batch=gcnn_batch, batch_size=25, produces=("training_curve",),
+        node_blocks=True)
 def gcnn(instance, *, seed: int = 0, steps: int = 750, batch: int = 20, lr: float = 0.01, decay: float = 0.9,
          decay_every: int = 10, weight_decay: float = 2.0, ensemble: int = 2, curve_every: int = 10,
          curve_size: int = 100, dtype: str = "float64", stability_steps: int = 500,
          stability_size: int = 100) -> Design:
     """Gama-Sojoudi GCNN (192 parameters, instantaneous multi-hop information), trained as the paper did.
+
+    On node blocks the filter has p input channels and q outputs per node
+    (module docstring): 5 p 32 + 32 q parameters; any Q and R.
 
     Parameters
     ----------
@@ -445,7 +703,7 @@ def gcnn(instance, *, seed: int = 0, steps: int = 750, batch: int = 20, lr: floa
     Design
         Simulated cost on the validation set (control-variate estimate; the
         sample mean in ``extras["plain_cost"]``); links are the given graph's
-        off-diagonal edges, ``info_model="instantaneous"``; ``extras`` holds the
+        off-diagonal edges (between nodes), ``info_model="instantaneous"``; ``extras`` holds the
         training curve, ``n_parameters``, the spectral radius of the closed loop
         linearized at the origin, and the boundedness of a long rollout.
     """

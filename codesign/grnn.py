@@ -21,6 +21,7 @@ import numpy as np
 
 from .controllers import register_controller
 from .design import Design, count_links
+from .instances import node_ranks
 from .evaluation import exact_cost, impulse_responses, simulate, spectral_radius, validation_set
 from .methods import method
 from .training import ACTIVATIONS, DTYPES, ModelSpec, init_fwg, train_stack
@@ -34,6 +35,16 @@ VARIANTS = ("given", "dense", "fixed", "sparse")
 _DATA, _INIT, _DENSE_S, _REFINE, _SELECT = 11, 12, 13, 14, 0xC0DE
 
 
+def _slot_index(owners, nodes: int) -> tuple[np.ndarray, int]:
+    """Where each state (or input) sits in the padded node signal, slot-major, and the slot count.
+
+    Slot c of node i is entry c N + i: with one entry per node the layout is the plain one.
+    """
+    owners = np.asarray(owners, dtype=int)
+    ranks = node_ranks(owners)
+    return ranks * nodes + owners, int(ranks.max()) + 1 if owners.size else 1
+
+
 @register_controller("grnn")
 @dataclass(frozen=True, eq=False)
 class GRNNController:
@@ -43,65 +54,129 @@ class GRNNController:
     ----------
     S : ndarray (N, N)
         Graph shift operator; its off-diagonal support is the set of links.
-    F : ndarray (h,)
+    F : ndarray (h,), or (p, h) when nodes hold several states
+        Input weights: node i's (padded) states x_i in R^p enter its hidden state as x_i' F.
     W : ndarray (h, h)
-    G : ndarray (h,)
+    G : ndarray (h,), or (h, q) when nodes hold several inputs
+        Readout: node i's (padded) inputs are Z_i G.
+    state_nodes, input_nodes : ndarray of int, optional
+        The node of each state and input (None: one of each per node, in order).
+        State k is slot "its rank among its node's states" of its node's signal.
     """
 
     S: np.ndarray
     F: np.ndarray
     W: np.ndarray
     G: np.ndarray
+    state_nodes: np.ndarray | None = None
+    input_nodes: np.ndarray | None = None
 
     def __post_init__(self):
         for name in ("S", "F", "W", "G"):
             value = np.array(getattr(self, name), dtype=float)
             value.setflags(write=False)
             object.__setattr__(self, name, value)
-        h = self.F.size
         if self.S.ndim != 2 or self.S.shape[0] != self.S.shape[1]:
             raise ValueError(f"S must be square, got shape {self.S.shape}")
-        if self.W.shape != (h, h) or self.G.size != h:
-            raise ValueError(f"F, W, G must have shapes (h,), (h, h), (h,); got {self.F.shape}, "
-                             f"{self.W.shape}, {self.G.shape}")
-        object.__setattr__(self, "F", self.F.ravel())
-        object.__setattr__(self, "G", self.G.ravel())
+        if self.W.ndim != 2 or self.W.shape[0] != self.W.shape[1]:
+            raise ValueError(f"W must be square (h, h), got shape {self.W.shape}")
+        h, nodes = self.W.shape[0], self.S.shape[0]
+        blocks = self.state_nodes is not None or self.input_nodes is not None
+        if not blocks:
+            if self.F.size != h or self.G.size != h:
+                raise ValueError(f"F, W, G must have shapes (h,), (h, h), (h,); got {self.F.shape}, "
+                                 f"{self.W.shape}, {self.G.shape}")
+            object.__setattr__(self, "F", self.F.ravel())
+            object.__setattr__(self, "G", self.G.ravel())
+            return
+        layout = {}
+        for name, default in (("state_nodes", nodes), ("input_nodes", nodes)):
+            value = getattr(self, name)
+            owners = np.arange(default) if value is None else np.array(value, dtype=int)
+            owners.setflags(write=False)
+            object.__setattr__(self, name, owners)
+            layout[name] = _slot_index(owners, nodes)
+        (p_index, p), (q_index, q) = layout["state_nodes"], layout["input_nodes"]
+        if self.F.shape in ((p, h), (h,) * (p == 1)) and self.G.shape in ((h, q), (h,) * (q == 1)):
+            object.__setattr__(self, "F", self.F.reshape(p, h))
+            object.__setattr__(self, "G", self.G.reshape(h, q))
+        else:
+            raise ValueError(f"with {p} states and {q} inputs per node, F and G must have shapes ({p}, {h}) and "
+                             f"({h}, {q}); got {self.F.shape} and {self.G.shape}")
+        object.__setattr__(self, "_state_index", p_index)
+        object.__setattr__(self, "_input_index", q_index)
 
     @property
     def hidden(self) -> int:
-        return self.F.size
+        return self.W.shape[0]
+
+    @property
+    def blocks(self) -> bool:
+        """Whether nodes hold several states or inputs (F and G are matrices)."""
+        return self.state_nodes is not None
 
     def reset(self, batch: int):
         # Hidden state kept node-major, (N, batch, h), so that S acts by one matrix product.
         return np.zeros((self.S.shape[0], batch, self.hidden))
 
-    def step(self, state, x):
+    def _pre_activation(self, state, x):
         n, batch, h = state.shape
         SZW = (self.S @ (state.reshape(n * batch, h) @ self.W).reshape(n, batch * h)).reshape(n, batch, h)
-        Z = np.tanh(SZW + x.T[:, :, None] * self.F)
-        return (Z @ self.G).T, Z
+        if not self.blocks:
+            return SZW + x.T[:, :, None] * self.F
+        padded = np.zeros((batch, self.F.shape[0] * n))
+        padded[:, self._state_index] = x
+        return SZW + np.einsum("bcn,ck->nbk", padded.reshape(batch, -1, n), self.F)
+
+    def _output(self, Z):
+        if not self.blocks:
+            return (Z @ self.G).T
+        return np.einsum("nbk,kc->bcn", Z, self.G).reshape(Z.shape[1], -1)[:, self._input_index]
+
+    def step(self, state, x):
+        Z = np.tanh(self._pre_activation(state, x))
+        return self._output(Z), Z
 
     def arrays(self) -> dict:
-        return {"S": self.S, "F": self.F, "W": self.W, "G": self.G}
+        arrays = {"S": self.S, "F": self.F, "W": self.W, "G": self.G}
+        if self.blocks:
+            arrays.update(state_nodes=self.state_nodes, input_nodes=self.input_nodes)
+        return arrays
 
     @classmethod
     def from_arrays(cls, arrays: dict) -> "GRNNController":
-        return cls(arrays["S"], arrays["F"], arrays["W"], arrays["G"])
+        return cls(arrays["S"], arrays["F"], arrays["W"], arrays["G"],
+                   arrays.get("state_nodes"), arrays.get("input_nodes"))
 
     @property
     def support(self) -> np.ndarray:
         return self.S != 0
 
+    @property
+    def states(self) -> int:
+        return self.S.shape[0] if not self.blocks else self.state_nodes.size
+
     def linearized_closed_loop(self, instance) -> np.ndarray:
         """Closed loop in (x, vec Z) linearized at the origin (tanh'(0) = 1).
 
-        With z = vec(Z) row-major: z' = (S kron W') z + (I kron F') x,
-        u = (I kron G') z', x' = A x + B u.
+        With z = vec(Z) row-major (node i's features at i h, ..., i h + h - 1):
+        z' = (S kron W') z + Kzx x, u = Gm z', x' = A x + B u, where Kzx puts
+        F' x_i into node i's features and Gm reads Z_i G (I kron F', I kron G'
+        with one state and one input per node).
         """
         n, h = self.S.shape[0], self.hidden
         Kzz = np.kron(self.S, self.W.T)
-        Kzx = np.kron(np.eye(n), self.F.reshape(h, 1))
-        Gm = np.kron(np.eye(n), self.G.reshape(1, h))
+        if not self.blocks:
+            Kzx = np.kron(np.eye(n), self.F.reshape(h, 1))
+            Gm = np.kron(np.eye(n), self.G.reshape(1, h))
+        else:
+            s_nodes, s_slots = self.state_nodes, node_ranks(self.state_nodes)
+            u_nodes, u_slots = self.input_nodes, node_ranks(self.input_nodes)
+            Kzx = np.zeros((n * h, s_nodes.size))
+            Gm = np.zeros((u_nodes.size, n * h))
+            for k in range(h):
+                Kzx[s_nodes * h + k, np.arange(s_nodes.size)] = self.F[s_slots, k]
+                Gm[np.arange(u_nodes.size), u_nodes * h + k] = self.G[k, u_slots]
         top = np.hstack([instance.A + instance.B @ Gm @ Kzx, instance.B @ Gm @ Kzz])
         bottom = np.hstack([Kzx, Kzz])
         return np.vstack([top, bottom])
@@ -119,15 +194,13 @@ class LinearGRNNController(GRNNController):
     """
 
     def step(self, state, x):
-        n, batch, h = state.shape
-        SZW = (self.S @ (state.reshape(n * batch, h) @ self.W).reshape(n, batch * h)).reshape(n, batch, h)
-        Z = SZW + x.T[:, :, None] * self.F
-        return (Z @ self.G).T, Z
+        Z = self._pre_activation(state, x)
+        return self._output(Z), Z
 
     def closed_loop_responses(self, instance, steps: int | None = None):
         """Maps ``(phi_x, phi_u)`` of this controller in closed loop with the instance (by :meth:`step`)."""
-        if instance.n != self.S.shape[0]:
-            raise ValueError(f"controller has n = {self.S.shape[0]}, instance has n = {instance.n}")
+        if instance.n != self.states:
+            raise ValueError(f"controller has n = {self.states}, instance has n = {instance.n}")
         return impulse_responses(instance, self, steps)
 
 
@@ -207,20 +280,40 @@ def _selection_set(instance, size: int) -> np.ndarray:
     return np.random.default_rng([instance.seed, _SELECT]).standard_normal((size, instance.n))
 
 
+def _padded_problem(inst) -> dict:
+    """The plant, costs and placements in the trainer's padded node layout (p states, q inputs per node).
+
+    With one state and one input per node the layout is the plant's own.
+    """
+    if inst.scalar_nodes:
+        return dict(A=inst.A, B=inst.B, Q=inst.Q, R=inst.R, P=inst.P, state_index=None, p=1, q=1,
+                    embed=lambda x: x)
+    N = inst.nodes
+    s_index, p = _slot_index(inst.state_nodes, N)
+    u_index, q = _slot_index(inst.input_nodes, N)
+    Ex = np.zeros((p * N, inst.n))
+    Ex[s_index, np.arange(inst.n)] = 1.0
+    Eu = np.zeros((q * N, inst.m))
+    Eu[u_index, np.arange(inst.m)] = 1.0
+    return dict(A=Ex @ inst.A @ Ex.T, B=Ex @ inst.B @ Eu.T, Q=Ex @ inst.Q @ Ex.T, R=Eu @ inst.R @ Eu.T,
+                P=Ex @ inst.P @ Ex.T, state_index=s_index, p=p, q=q, embed=lambda x: x @ Ex.T)
+
+
 def _spec(job: _Job, member: int, *, S0, mask, lr, beta, penalty, init_salt) -> ModelSpec:
     inst, s = job.instance, job.settings
-    F, W, G = init_fwg(np.random.default_rng([job.seed, member, init_salt]), s["hidden"])
+    padded = _padded_problem(inst)
+    F, W, G = init_fwg(np.random.default_rng([job.seed, member, init_salt]), s["hidden"], padded["p"], padded["q"])
     return ModelSpec(
-        A=inst.A, B=inst.B, Q=inst.Q, R=inst.R, P=inst.P, trace_P=inst.trace_P,
+        A=padded["A"], B=padded["B"], Q=padded["Q"], R=padded["R"], P=padded["P"], trace_P=inst.trace_P,
         S0=np.asarray(S0, dtype=float), mask=np.asarray(mask, dtype=bool), F0=F, W0=W, G0=G,
-        data_seed=[job.seed, member, _DATA], curve_x0=_selection_set(inst, s["curve_size"]),
-        lr=lr, beta=beta, penalty=penalty,
+        data_seed=[job.seed, member, _DATA], curve_x0=padded["embed"](_selection_set(inst, s["curve_size"])),
+        lr=lr, beta=beta, penalty=penalty, state_index=padded["state_index"],
     )
 
 
 def _dense_init(job: _Job, member: int) -> np.ndarray:
     rng = np.random.default_rng([job.seed, member, _DENSE_S])
-    S = rng.random((job.instance.n, job.instance.n))
+    S = rng.random((job.instance.nodes, job.instance.nodes))
     return S / S.sum(axis=1, keepdims=True)  # row-stochastic, as in the paper code
 
 
@@ -228,7 +321,7 @@ def _first_stage_specs(job: _Job) -> list[ModelSpec]:
     inst, s = job.instance, job.settings
     frob = s["frob"]
     standard = (frob, frob, 0.0, frob)
-    n = inst.n
+    n = inst.nodes
     specs = []
     for member in range(s["ensemble"]):
         if job.variant == "given":
@@ -267,7 +360,9 @@ def _train_groups(specs_by_job: list[list[ModelSpec]], jobs: list[_Job], stack_s
     for j, (job, specs) in enumerate(zip(jobs, specs_by_job)):
         s = job.settings
         key = (s["steps"], s["batch"], job.instance.horizon, s["clip"], s["curve_every"], s["dtype"],
-               s["activation"], s["hidden"], s["curve_size"], job.instance.n)
+               s["activation"], s["hidden"], s["curve_size"], job.instance.n, job.instance.m, job.instance.nodes,
+               _slot_index(job.instance.state_nodes, job.instance.nodes)[1],
+               _slot_index(job.instance.input_nodes, job.instance.nodes)[1])
         groups.setdefault(key, []).extend((j, k) for k in range(len(specs)))
     for key, members in groups.items():
         steps, batch, horizon, clip, curve_every, dtype, activation = key[:7]
@@ -365,7 +460,10 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
                                   info_model="delayed", seconds=seconds, extras=extras)
         result = refined[best]
     linear = job.settings["activation"] == "identity"
-    controller = (LinearGRNNController if linear else GRNNController)(result.S, result.F, result.W, result.G)
+    nodes = {} if job.instance.scalar_nodes else dict(state_nodes=job.instance.state_nodes,
+                                                       input_nodes=job.instance.input_nodes)
+    controller = (LinearGRNNController if linear else GRNNController)(result.S, result.F, result.W, result.G,
+                                                                       **nodes)
     links, self_loops = count_links(controller.S)
     extras["curve"] = _curve(result)
     extras["spectral_radius"] = spectral_radius(controller.linearized_closed_loop(job.instance))
@@ -527,5 +625,6 @@ for _name, _variant, _label, _summary in (
 ):
     method(_name, label=_label, summary=_summary, bind={"variant": _variant},
            exclude=() if _variant == "sparse" else _SPARSE_ONLY, batch=_VariantBatch(_variant), batch_size=25,
+           node_blocks=True,
            produces=("training_curve", "topology_path") if _variant == "sparse" else ("training_curve",),
            path_param="beta" if _variant == "sparse" else None)(grnn)

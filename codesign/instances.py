@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Instance", "InstanceError", "paper_instance", "hop_distances"]
+__all__ = ["Instance", "InstanceError", "paper_instance", "hop_distances", "node_ranks"]
 
 
 class InstanceError(ValueError):
@@ -299,6 +299,16 @@ def _node_maps(n: int, m: int, state_nodes, input_nodes) -> tuple[np.ndarray, np
         if un.size and un.max() >= nodes:
             raise InstanceError(f"input_nodes names node {int(un.max())}, but state_nodes has nodes 0..{nodes - 1}")
     return sn, un
+
+
+def node_ranks(owners) -> np.ndarray:
+    """Rank of each entry among the entries of its node: its slot when node signals are padded to a common width."""
+    owners = np.asarray(owners, dtype=int)
+    ranks = np.zeros(owners.shape, dtype=int)
+    for node in np.unique(owners):
+        where = np.flatnonzero(owners == node)
+        ranks[where] = np.arange(where.size)
+    return ranks
 
 
 def _one_hot(owners, nodes: int) -> np.ndarray:

@@ -83,12 +83,20 @@ def _tanh_(pre: torch.Tensor) -> torch.Tensor:
     return torch.sigmoid(pre.mul_(2.0), out=pre).mul_(2.0).sub_(1.0)
 
 
-def init_fwg(rng: np.random.Generator, hidden: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """F (h,), W (h, h), G (h,): uniform [0, 1) entries scaled to spectral norm 1 (paper code)."""
-    F = rng.random((1, hidden))
-    G = rng.random((hidden, 1))
+def init_fwg(rng: np.random.Generator, hidden: int, states: int = 1, inputs: int = 1
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """F, W (h, h), G: uniform [0, 1) entries scaled to spectral norm 1 (paper code).
+
+    F is (h,) and G (h,) with one state and one input per node (``states`` =
+    ``inputs`` = 1), else F is (states, h) and G (h, inputs).
+    """
+    F = rng.random((states, hidden))
+    G = rng.random((hidden, inputs))
     W = rng.random((hidden, hidden))
-    return (F / np.linalg.norm(F, 2)).ravel(), W / np.linalg.norm(W, 2), (G / np.linalg.norm(G, 2)).ravel()
+    F, W, G = F / np.linalg.norm(F, 2), W / np.linalg.norm(W, 2), G / np.linalg.norm(G, 2)
+    if states == inputs == 1:
+        return F.ravel(), W, G.ravel()
+    return F, W, G
 
 
 @dataclass
@@ -103,10 +111,13 @@ class ModelSpec:
         Normalizer of reported costs.
     S0 : ndarray (N, N)
         Initial graph shift operator (zero outside ``mask`` when S trains).
+        A, B, Q, R, P are in the padded node layout when nodes hold several
+        states or inputs (``state_index``): p N states and q N inputs, slot-major.
     mask : ndarray (N, N) of bool
         Entries of S that train; all False freezes S.
     F0, W0, G0 : ndarray
-        Initial F (h,), W (h, h), G (h,).
+        Initial F (h,) or (p, h), W (h, h), G (h,) or (h, q): p states and q
+        inputs per node (one of each: the vectors).
     data_seed : int or sequence of int
         Seed of this model's training draws x(0) ~ N(0, I).
     curve_x0 : ndarray (batch_v, N)
@@ -117,6 +128,10 @@ class ModelSpec:
         Weight of the l1 penalty beta * sum |S_ij|.
     penalty : tuple of 4 floats
         Weights of the plain Frobenius norms of (S, F, W, G) in the loss.
+    state_index : ndarray of int, optional
+        Where each of the n states sits in the padded state vector: training
+        draws x(0) ~ N(0, I_n) are placed there, the padding stays 0. None: the
+        states are the plant's rows, in order.
     """
 
     A: np.ndarray
@@ -135,6 +150,7 @@ class ModelSpec:
     lr: float = 0.02
     beta: float = 0.0
     penalty: tuple = (2.0, 2.0, 0.0, 2.0)
+    state_index: np.ndarray | None = None
 
 
 @dataclass
@@ -216,50 +232,68 @@ class _Problem:
         self.Qt = self.Q.transpose(1, 2).contiguous()
         self.Rt = self.R.transpose(1, 2).contiguous()
         self.Pt = self.P.transpose(1, 2).contiguous()
-        n = self.A.shape[1]
-        eye = torch.eye(n, dtype=dtype)
         # Q = R = I in the paper's family: skip those products.
-        self.Q_identity = bool(torch.all(self.Q == eye))
-        self.R_identity = bool(torch.all(self.R == eye))
+        self.Q_identity = bool(torch.all(self.Q == torch.eye(self.Q.shape[1], dtype=dtype)))
+        self.R_identity = bool(torch.all(self.R == torch.eye(self.R.shape[1], dtype=dtype)))
         self.trace_P = torch.tensor([s.trace_P for s in specs], dtype=dtype)
 
 
 class _Workspace:
-    """Buffers reused across training steps (fresh 1 MB tensors every op cost page faults)."""
+    """Buffers reused across training steps (fresh 1 MB tensors every op cost page faults).
 
-    def __init__(self, M, N, Bsz, h, horizon, dtype, keep: bool):
+    ``p`` states and ``q`` inputs per node (padded layout, slot-major: state c of
+    node i is entry c N + i).
+    """
+
+    def __init__(self, M, N, Bsz, h, horizon, dtype, keep: bool, p: int = 1, q: int = 1):
         T = horizon
         self.shape = (M, N, Bsz, h)
-        self.X = torch.empty(T + 1, M, Bsz, N, dtype=dtype)
-        self.U = torch.empty(T, M, Bsz, N, dtype=dtype)
+        self.p, self.q = p, q
+        self.X = torch.empty(T + 1, M, Bsz, p * N, dtype=dtype)
+        self.U = torch.empty(T, M, Bsz, q * N, dtype=dtype)
         depth = T if keep else 2
         self.Zs = torch.empty(depth, M, h, Bsz, N, dtype=dtype)
         self.Ys = torch.empty(depth, M, h, Bsz, N, dtype=dtype)
         self.keep = keep
         self.J = torch.empty(M, 1, 1, dtype=dtype)
-        self.PxT = torch.empty(M, Bsz, N, dtype=dtype)
+        self.PxT = torch.empty(M, Bsz, p * N, dtype=dtype)
+        self.RUt = torch.empty(M, Bsz, q * N, dtype=dtype)
+        if q > 1:
+            self.Uq = torch.empty(M, q, Bsz, N, dtype=dtype)  # u slot-first, as G^T Z gives it
         if keep:
-            self.QX = torch.empty(T, M, Bsz, N, dtype=dtype)
-            self.RU = torch.empty(T, M, Bsz, N, dtype=dtype)
-            self.du = torch.empty(M, Bsz, N, dtype=dtype)
-            self.lam = [torch.empty(M, Bsz, N, dtype=dtype) for _ in range(2)]
+            self.QX = torch.empty(T, M, Bsz, p * N, dtype=dtype)
+            self.RU = torch.empty(T, M, Bsz, q * N, dtype=dtype)
+            self.du = torch.empty(M, Bsz, q * N, dtype=dtype)
+            self.lam = [torch.empty(M, Bsz, p * N, dtype=dtype) for _ in range(2)]
             self.dZ, self.dZn, self.tmp, self.dPre, self.dY = (
                 torch.empty(M, h, Bsz, N, dtype=dtype) for _ in range(5)
             )
+            if p > 1:
+                self.xp = torch.empty(M, p, Bsz, N, dtype=dtype)
+                self.lp = torch.empty(M, p, Bsz, N, dtype=dtype)
+
+
+def _slots(v: torch.Tensor, k: int) -> torch.Tensor:
+    """(M, B, k N) node signals as an (M, k, B, N) view: slot first (no copy)."""
+    M, Bsz, kN = v.shape
+    return v.view(M, Bsz, k, kN // k).transpose(1, 2)
 
 
 def _forward(prob, S, F, W, G, x0, horizon: int, ws: _Workspace, activation: str = "tanh") -> torch.Tensor:
-    """Roll the stack out from x0 (M, B, N) into the workspace; J (M,) summed over the batch.
+    """Roll the stack out from x0 (M, B, p N) into the workspace; J (M,) summed over the batch.
 
     Node signals are row vectors here (nodes on the last axis), so ``S Z`` is
     ``Z S'`` and ``Z W`` acts on the feature axis: both are single batched
     matmuls with wide operands, which BLAS runs far faster than the tall-thin
-    (N B, h) x (h, h) products of the node-major layout.
+    (N B, h) x (h, h) products of the node-major layout. F is (M, p, h) and G
+    (M, h, q) (views of (M, h) when nodes hold one state and one input).
     """
     M, N, Bsz, h = ws.shape
+    p, q = ws.p, ws.q
     BN, hB = Bsz * N, h * Bsz
-    Fb = F.view(M, h, 1, 1)
-    Gr = G.view(M, 1, h)
+    F3 = F.view(M, p, h)
+    Fb = [F3[:, c].reshape(M, h, 1, 1) for c in range(p)]
+    Gq = G.view(M, 1, h) if q == 1 else G.view(M, h, q).transpose(1, 2).contiguous()  # (M, q, h)
     Wt = W.transpose(1, 2)
     St = S.transpose(1, 2)
     X, U, J = ws.X, ws.U, ws.J
@@ -268,42 +302,57 @@ def _forward(prob, S, F, W, G, x0, horizon: int, ws: _Workspace, activation: str
     J.zero_()
     for t in range(horizon):
         x = X[t]
+        xs = _slots(x, p)
         slot = t if ws.keep else t % 2
         Z = ws.Zs[slot]
         if t == 0:
-            torch.mul(x.unsqueeze(1), Fb, out=Z)
+            torch.mul(xs[:, 0].unsqueeze(1), Fb[0], out=Z)
+            first = 1
         else:
             Zprev = ws.Zs[slot - 1] if ws.keep else ws.Zs[1 - slot]
             Y = ws.Ys[slot]
             torch.bmm(Wt, Zprev.view(M, h, BN), out=Y.view(M, h, BN))  # (Z W) on features
             torch.bmm(Y.view(M, hB, N), St, out=Z.view(M, hB, N))  # S (.) on nodes
-            Z.addcmul_(x.unsqueeze(1), Fb)
+            first = 0
+        for c in range(first, p):
+            Z.addcmul_(xs[:, c].unsqueeze(1), Fb[c])
         if squash:
             _tanh_(Z)
         u = U[t]
-        torch.bmm(Gr, Z.view(M, h, BN), out=u.view(M, 1, BN))
+        if q == 1:
+            torch.bmm(Gq, Z.view(M, h, BN), out=u.view(M, 1, BN))
+        else:
+            torch.bmm(Gq, Z.view(M, h, BN), out=ws.Uq.view(M, q, BN))
+            _slots(u, q).copy_(ws.Uq)
         torch.bmm(x, prob.At, out=X[t + 1])
         X[t + 1].baddbmm_(u, prob.Bt)
+        xv, uv = x.view(M, 1, -1), u.view(M, 1, -1)
         if prob.Q_identity:
-            J.baddbmm_(x.view(M, 1, BN), x.view(M, BN, 1))
+            J.baddbmm_(xv, x.view(M, -1, 1))
         else:
             qx = ws.QX[t] if ws.keep else ws.PxT
             torch.bmm(x, prob.Qt, out=qx)
-            J.baddbmm_(x.view(M, 1, BN), qx.view(M, BN, 1))
+            J.baddbmm_(xv, qx.view(M, -1, 1))
         if prob.R_identity:
-            J.baddbmm_(u.view(M, 1, BN), u.view(M, BN, 1))
+            J.baddbmm_(uv, u.view(M, -1, 1))
         else:
-            ru = ws.RU[t] if ws.keep else ws.PxT
+            ru = ws.RU[t] if ws.keep else ws.RUt
             torch.bmm(u, prob.Rt, out=ru)
-            J.baddbmm_(u.view(M, 1, BN), ru.view(M, BN, 1))
+            J.baddbmm_(uv, ru.view(M, -1, 1))
     xT = X[horizon]
     torch.bmm(xT, prob.Pt, out=ws.PxT)
-    J.baddbmm_(xT.view(M, 1, BN), ws.PxT.view(M, BN, 1))
+    J.baddbmm_(xT.view(M, 1, -1), ws.PxT.view(M, -1, 1))
     return J.view(M).clone()
 
 
 def _norm(p):
     return p.reshape(p.shape[0], -1).norm(dim=1)
+
+
+def _node_sizes(prob, S) -> tuple[int, int, int]:
+    """Nodes N and padded states p and inputs q per node of a stacked problem."""
+    N = S.shape[1]
+    return N, prob.A.shape[1] // N, prob.B.shape[2] // N
 
 
 def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None, activation="tanh"):
@@ -313,9 +362,9 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None,
     ----------
     prob : _Problem
     S, F, W, G : Tensor
-        Shapes (M, N, N), (M, h), (M, h, h), (M, h).
-    x0 : Tensor (M, B, N)
-        Initial conditions, one row per trajectory.
+        Shapes (M, N, N), (M, h) or (M, p, h), (M, h, h), (M, h) or (M, h, q).
+    x0 : Tensor (M, B, p N)
+        Initial conditions, one row per trajectory (padded slot-major layout).
     penalty : Tensor (M, 4)
         Frobenius-norm weights of (S, F, W, G).
     beta : Tensor (M,)
@@ -329,12 +378,13 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None,
     loss : Tensor (M,)
         mean_batch J + sum_k penalty_k ||param_k||_F + beta sum |S|.
     grads : list of Tensor
-        dS, dF, dW, dG (dS unmasked).
+        dS, dF, dW, dG (dS unmasked), shaped like S, F, W, G.
     """
-    M, Bsz, N = x0.shape
-    h = F.shape[1]
+    M, Bsz = x0.shape[:2]
+    N, p, q = _node_sizes(prob, S)
+    h = W.shape[1]
     if ws is None:
-        ws = _Workspace(M, N, Bsz, h, horizon, S.dtype, keep=True)
+        ws = _Workspace(M, N, Bsz, h, horizon, S.dtype, keep=True, p=p, q=q)
     BN, hB = Bsz * N, h * Bsz
     _check_activation(activation)
     squash = activation == "tanh"
@@ -343,31 +393,40 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None,
     QX = X if prob.Q_identity else ws.QX
     RU = U if prob.R_identity else ws.RU
     c2 = 2.0 / Bsz
-    Gc = G.view(M, h, 1)
-    Fr = F.view(M, 1, h)
+    Gc = G.view(M, h, q)
+    Fr = F.view(M, p, h)
     dS = torch.zeros_like(S)
     # dF, dG accumulate as row vectors: (1, BN) x (BN, h) runs ~6x faster than (h, BN) x (BN, 1).
-    dF = torch.zeros(M, 1, h, dtype=S.dtype)
+    dF = torch.zeros(M, p, h, dtype=S.dtype)
     dWt = torch.zeros_like(W)
-    dG = torch.zeros(M, 1, h, dtype=S.dtype)
+    dG = torch.zeros(M, q, h, dtype=S.dtype)
     lam, lam_next = ws.lam
     torch.mul(ws.PxT, c2, out=lam)
     du, dZ, dZn, tmp, dPre, dY = ws.du, ws.dZ, ws.dZn, ws.tmp, ws.dPre, ws.dY
     dPre_h = dPre.view(M, h, BN)
     for t in range(horizon - 1, -1, -1):
         torch.baddbmm(RU[t], lam, prob.B, beta=c2, out=du)  # d/du of x' = x A' + u B'
+        if q == 1:
+            duq = du.view(M, 1, BN)
+        else:
+            ws.Uq.copy_(_slots(du, q))
+            duq = ws.Uq.view(M, q, BN)
         Zn = Zs[t]  # Z(t+1)
         if t == horizon - 1:
-            torch.bmm(Gc, du.view(M, 1, BN), out=dZn.view(M, h, BN))
+            torch.bmm(Gc, duq, out=dZn.view(M, h, BN))
         else:
-            torch.baddbmm(dZ.view(M, h, BN), Gc, du.view(M, 1, BN), out=dZn.view(M, h, BN))
-        dG.baddbmm_(du.view(M, 1, BN), Zn.view(M, h, BN).transpose(1, 2))
+            torch.baddbmm(dZ.view(M, h, BN), Gc, duq, out=dZn.view(M, h, BN))
+        dG.baddbmm_(duq, Zn.view(M, h, BN).transpose(1, 2))
         if squash:
             torch.mul(dZn, Zn, out=tmp)
             torch.addcmul(dZn, tmp, Zn, value=-1.0, out=dPre)  # dZn * (1 - Zn^2)
         else:
             dPre.copy_(dZn)
-        dF.baddbmm_(X[t].view(M, 1, BN), dPre_h.transpose(1, 2))
+        if p == 1:
+            dF.baddbmm_(X[t].view(M, 1, BN), dPre_h.transpose(1, 2))
+        else:
+            ws.xp.copy_(_slots(X[t], p))
+            dF.baddbmm_(ws.xp.view(M, p, BN), dPre_h.transpose(1, 2))
         if t == 0:
             break
         dS.baddbmm_(dPre.view(M, hB, N).transpose(1, 2), Ys[t].view(M, hB, N))
@@ -375,19 +434,23 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None,
         dWt.baddbmm_(dY.view(M, h, BN), Zs[t - 1].view(M, h, BN).transpose(1, 2))
         torch.bmm(W, dY.view(M, h, BN), out=dZ.view(M, h, BN))
         torch.baddbmm(QX[t], lam, prob.A, beta=c2, out=lam_next)
-        lam_next.view(M, 1, BN).baddbmm_(Fr, dPre_h)
+        if p == 1:
+            lam_next.view(M, 1, BN).baddbmm_(Fr, dPre_h)
+        else:
+            torch.bmm(Fr, dPre_h, out=ws.lp.view(M, p, BN))
+            _slots(lam_next, p).add_(ws.lp)
         lam, lam_next = lam_next, lam
-    dF = dF.view(M, h)
-    dG = dG.view(M, h)
+    dF = dF.view(F.shape)
+    dG = dG.view(G.shape) if q == 1 else dG.transpose(1, 2).reshape(G.shape)
     dW = dWt.transpose(1, 2)
     loss = J / Bsz + beta * S.abs().sum((1, 2))
     grads = [dS, dF, dW, dG]
-    for k, p in enumerate((S, F, W, G)):
+    for k, param in enumerate((S, F, W, G)):
         weight = penalty[:, k]
-        norm = _norm(p)
+        norm = _norm(param)
         loss = loss + weight * norm
         scale = torch.where(norm > 0, weight / norm.clamp_min(1e-300), torch.zeros_like(norm))
-        grads[k] = grads[k] + scale.view((-1,) + (1,) * (p.dim() - 1)) * p
+        grads[k] = grads[k] + scale.view((-1,) + (1,) * (param.dim() - 1)) * param
     grads[0] = grads[0] + beta.view(-1, 1, 1) * torch.sign(S)
     return loss, grads
 
@@ -395,34 +458,38 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None,
 def loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon, activation="tanh"):
     """The same per-model loss with torch.tanh, node-major and autograd-friendly (test reference).
 
-    ``x0`` has shape (M, B, N) as in :func:`grnn_loss_and_grad`.
+    ``x0`` has shape (M, B, p N) as in :func:`grnn_loss_and_grad`.
     """
-    x = x0.transpose(1, 2)
-    M, N, Bsz = x.shape
-    h = F.shape[1]
+    M, Bsz = x0.shape[:2]
+    N, p, q = _node_sizes(prob, S)
+    h = W.shape[1]
+    x = x0.transpose(1, 2)  # (M, p N, B): states slot-major
+    F3, G3 = F.reshape(M, p, h), G.reshape(M, h, q)
     Z = torch.zeros(M, N, Bsz, h, dtype=x0.dtype)
     J = torch.zeros(M, dtype=x0.dtype)
     _check_activation(activation)
     sigma = torch.tanh if activation == "tanh" else (lambda pre: pre)
     for _ in range(horizon):
         SZ = torch.einsum("mij,mjbk->mibk", S, Z)
-        Z = sigma(torch.einsum("mibk,mkl->mibl", SZ, W) + x.unsqueeze(-1) * F.view(M, 1, 1, h))
-        u = torch.einsum("mibk,mk->mib", Z, G)
+        xin = torch.einsum("mcib,mck->mibk", x.reshape(M, p, N, Bsz), F3)
+        Z = sigma(torch.einsum("mibk,mkl->mibl", SZ, W) + xin)
+        u = torch.einsum("mibk,mkc->mcib", Z, G3).reshape(M, q * N, Bsz)
         J = J + torch.einsum("mib,mij,mjb->m", x, prob.Q, x) + torch.einsum("mib,mij,mjb->m", u, prob.R, u)
         x = torch.einsum("mij,mjb->mib", prob.A, x) + torch.einsum("mij,mjb->mib", prob.B, u)
     J = J + torch.einsum("mib,mij,mjb->m", x, prob.P, x)
     loss = J / Bsz + beta * S.abs().sum((1, 2))
-    for k, p in enumerate((S, F, W, G)):
-        loss = loss + penalty[:, k] * _norm(p)
+    for k, param in enumerate((S, F, W, G)):
+        loss = loss + penalty[:, k] * _norm(param)
     return loss
 
 
 @no_grad
 def rollout_cost(prob, S, F, W, G, x0, horizon, ws=None, activation="tanh") -> torch.Tensor:
-    """Mean normalized cost per model on the initial conditions x0 (M, B, N)."""
-    M, Bsz, N = x0.shape
+    """Mean normalized cost per model on the initial conditions x0 (M, B, p N)."""
+    M, Bsz = x0.shape[:2]
     if ws is None:
-        ws = _Workspace(M, N, Bsz, F.shape[1], horizon, S.dtype, keep=False)
+        N, p, q = _node_sizes(prob, S)
+        ws = _Workspace(M, N, Bsz, W.shape[1], horizon, S.dtype, keep=False, p=p, q=q)
     J = _forward(prob, S, F, W, G, x0, horizon, ws, activation)
     return J / Bsz / prob.trace_P
 
@@ -461,8 +528,13 @@ def train_stack(
     M = len(specs)
     if M == 0:
         return []
-    N = specs[0].A.shape[0]
+    N = specs[0].S0.shape[0]
     prob = _Problem(specs, tdt)
+    _, p, q = _node_sizes(prob, torch.empty(1, N, N))
+    padded = p * N
+    placements = [np.arange(padded) if s.state_index is None else np.asarray(s.state_index) for s in specs]
+    if len({len(k) for k in placements}) != 1:
+        raise ValueError("every model of a stack needs the same number of states")
 
     def stack(name):
         return torch.tensor(np.stack([np.asarray(getattr(s, name), dtype=float) for s in specs]), dtype=tdt)
@@ -486,9 +558,10 @@ def train_stack(
     curve_costs: list[torch.Tensor] = []
     last_loss = torch.full((M,), float("nan"), dtype=tdt)
 
-    h = F.shape[1]
-    ws_train = _Workspace(M, N, batch, h, horizon, tdt, keep=True)
-    ws_curve = _Workspace(M, N, curve_x0.shape[1], h, horizon, tdt, keep=False)
+    h = W.shape[1]
+    ws_train = _Workspace(M, N, batch, h, horizon, tdt, keep=True, p=p, q=q)
+    ws_curve = _Workspace(M, N, curve_x0.shape[1], h, horizon, tdt, keep=False, p=p, q=q)
+    draws = np.zeros((M, batch, padded))
 
     def record(k):
         curve_steps.append(k)
@@ -497,7 +570,9 @@ def train_stack(
     for k in range(steps):
         if curve_every and k % curve_every == 0:
             record(k)
-        x0 = torch.tensor(np.stack([rng.standard_normal((batch, N)) for rng in rngs]), dtype=tdt)
+        for m, (rng, where) in enumerate(zip(rngs, placements)):
+            draws[m][:, where] = rng.standard_normal((batch, len(where)))
+        x0 = torch.tensor(draws, dtype=tdt)
         x0.mul_(alive.view(M, 1, 1).to(tdt))
         loss, grads = grnn_loss_and_grad(
             prob, S, F, W, G, x0, penalty=penalty, beta=beta, horizon=horizon, ws=ws_train,

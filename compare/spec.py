@@ -83,10 +83,17 @@ class InstanceSpec:
 
     The family (:mod:`compare.families`) parses the spec's ``[instances]`` table
     into these and builds each :class:`codesign.Instance` where a run executes.
+    ``[[instances]]`` (a list of tables) joins several families in one
+    experiment; ``family`` is then their names joined by ``+``.
     """
 
     family: str = "paper"
     specs: tuple = ()
+
+    @property
+    def families(self) -> tuple[str, ...]:
+        """The families named, in order (several when ``[[instances]]`` is a list of tables)."""
+        return tuple(self.family.split("+"))
 
     def expand(self) -> list[dict]:
         """The instance specs, one dict per instance (``"family"`` included)."""
@@ -249,14 +256,14 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
     description = _typed("description", data.get("description", ""), str)
     if "instances" not in data:
         raise SpecError("spec: missing [instances] table")
-    instances = _parse_instances(_typed("instances", data["instances"], dict), base)
+    instances = _parse_instances(_typed("instances", data["instances"], (dict, list)), base)
     evaluation = _parse_evaluation(_typed("evaluation", data.get("evaluation", {}), dict))
     raw_methods = _typed("methods", data.get("methods", []), list)
     if not raw_methods:
         raise SpecError("methods: the spec needs at least one [[methods]] entry")
     from .families import get_family
 
-    fields = get_family(instances.family).fields
+    fields = {"family"}.union(*(get_family(name).fields for name in instances.families))
     methods = tuple(_parse_method(i, entry, base, loaded, fields) for i, entry in enumerate(raw_methods))
     return ExperimentSpec(name, description, instances, methods, evaluation, text, tuple(loaded), sections, pairs)
 
@@ -304,15 +311,25 @@ def _list_of(where: str, value, kind, *, positive: bool = True) -> tuple:
     return out
 
 
-def _parse_instances(table: dict, base) -> InstanceSpec:
+def _parse_instances(table, base) -> InstanceSpec:
+    """One ``[instances]`` table, or a list of them (``[[instances]]``: several families)."""
     from .families import UnknownFamilyError, get_family
 
-    name = _typed("instances.family", table.get("family", "paper"), str)
-    try:
-        family = get_family(name)
-    except UnknownFamilyError as exc:
-        raise SpecError(f"instances.family: {exc}") from None
-    return InstanceSpec(family=name, specs=tuple(family.parse(table, base)))
+    tables = [table] if isinstance(table, dict) else table
+    if not tables:
+        raise SpecError("instances: the list of [[instances]] tables is empty")
+    names, specs = [], []
+    for i, entry in enumerate(tables):
+        where = "instances" if isinstance(table, dict) else f"instances[{i}]"
+        entry = _typed(where, entry, dict)
+        name = _typed(f"{where}.family", entry.get("family", "paper"), str)
+        try:
+            family = get_family(name)
+        except UnknownFamilyError as exc:
+            raise SpecError(f"{where}.family: {exc}") from None
+        names.append(name)
+        specs.extend(family.parse(entry, base))
+    return InstanceSpec(family="+".join(dict.fromkeys(names)), specs=tuple(specs))
 
 
 def _parse_evaluation(table: dict) -> EvaluationSpec:
@@ -362,7 +379,7 @@ def _parse_method(index: int, entry, base, plugins: list, fields=frozenset()) ->
     filters = _typed(f"{where}.where", entry.get("where", {}), dict)
     for key, values in filters.items():
         if key not in fields:
-            raise SpecError(f"{where}.where.{key}: unknown instance field (this family has: "
+            raise SpecError(f"{where}.where.{key}: unknown instance field (the instances have: "
                             f"{', '.join(sorted(fields))})")
         if not isinstance(values, list) or not values:
             raise SpecError(f"{where}.where.{key}: expected a non-empty list of values, got {values!r}")

@@ -130,7 +130,7 @@ def test_instance_keys_are_validated_per_family(tmp_path, instances, message):
 def test_where_filters_name_the_familys_fields(tmp_path):
     _write_systems(tmp_path)
     text = SPEC.replace('method = "decentralized"', 'method = "decentralized"\nwhere = { a_norm = [1.05] }')
-    with pytest.raises(SpecError, match=r"where.a_norm: unknown instance field \(this family has: n, name\)"):
+    with pytest.raises(SpecError, match=r"where.a_norm: unknown instance field \(the instances have: family, n, name\)"):
         parse_spec(text, base=tmp_path)
     ok = parse_spec(SPEC.replace('method = "decentralized"', 'method = "decentralized"\nwhere = { name = ["sys1"] }'),
                     base=tmp_path)
@@ -300,3 +300,26 @@ def test_random_network_follows_the_lqrsp_example():
     spec = parse_spec('name = "r"\n[instances]\nfamily = "random_network"\nn = [12]\nseeds = 2\n'
                       '[[methods]]\nmethod = "lqr"\n')
     assert [r.instance["seed"] for r in spec.runs()] == [0, 1] and spec.runs()[0].instance["side"] == np.sqrt(12)
+
+
+def test_one_experiment_can_join_several_families(tmp_path):
+    """``[[instances]]`` lists tables of different families; ``where`` can pick a family."""
+    text = (
+        'name = "two"\n'
+        '[[instances]]\nfamily = "mass_spring"\nn = [4]\nhorizon = 10\n'
+        '[[instances]]\nfamily = "random_network"\nn = [6]\nseeds = 2\nhorizon = 10\n'
+        '[[methods]]\nmethod = "lqr"\n'
+        '[[methods]]\nmethod = "decentralized"\nwhere = { family = ["random_network"] }\n')
+    spec = parse_spec(text, base=tmp_path)
+    assert spec.instances.families == ("mass_spring", "random_network")
+    runs = spec.runs()
+    assert [(r.instance["family"], r.method) for r in runs] == [
+        ("mass_spring", "lqr"), ("random_network", "lqr"), ("random_network", "decentralized"),
+        ("random_network", "lqr"), ("random_network", "decentralized")]
+    with pytest.raises(SpecError, match=r"instances\[1\].family: unknown family 'mass'"):
+        parse_spec(text.replace('family = "random_network"\nn', 'family = "mass"\nn'), base=tmp_path)
+    (tmp_path / "two.toml").write_text(text)
+    result = _run(tmp_path / "two.toml", tmp_path / "out")
+    assert result.exit_code == 0, result.output
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "mass_spring, N = 4" in report and "random_network, N = 6" in report

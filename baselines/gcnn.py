@@ -46,7 +46,7 @@ import numpy as np
 from codesign.controllers import register_controller
 from codesign.design import Design, count_links
 from codesign.instances import node_ranks
-from codesign.evaluation import simulate, spectral_radius, validation_set
+from codesign.evaluation import simulate, simulate_to_precision, spectral_radius, validation_set
 from codesign.methods import method
 from codesign._lazy import lazy_import
 from codesign.training import DTYPES, BatchedAdam, no_grad, torch_dtype
@@ -624,7 +624,7 @@ def _finish(job: _GJob, results, seconds) -> Design:
         extras["bounded"] = bool(long.bounded)
         extras["max_state"] = float(long.max_state)
         extras["stability_steps"] = s["stability_steps"]
-    rollout = simulate(job.instance, controller)
+    rollout = simulate_to_precision(job.instance, controller)
     extras.update(rollout.summary())
     if not rollout.bounded:
         return Design.failure("gcnn", job.params, "diverged", "validation rollout unbounded",

@@ -30,6 +30,7 @@ __all__ = [
     "response_cost",
     "validation_set",
     "simulate",
+    "simulate_to_precision",
     "Rollout",
     "exact_cost",
     "compare_exact_and_simulated",
@@ -39,6 +40,10 @@ __all__ = [
 ]
 
 VALIDATION_SIZE = 2000
+#: Relative standard error a simulated cost aims for (:func:`simulate_to_precision`).
+PRECISION_TARGET = 1e-3
+#: The most validation draws :func:`simulate_to_precision` rolls out (16 x VALIDATION_SIZE).
+MAX_VALIDATION_SIZE = 32000
 #: Folds of the cross-fitted control-variate regression.
 CV_FOLDS = 10
 # Regression rows per coefficient at least this many, so that coefficients
@@ -320,6 +325,37 @@ def simulate(
     if control_variates and batch >= _MIN_CV_DRAWS:
         cost, stderr, estimator = control_variate_estimate(instance, x_start, costs)
     return Rollout(cost, stderr, costs, True, max_state, steps, plain, plain_stderr, estimator)
+
+
+def simulate_to_precision(instance, controller, size: int = VALIDATION_SIZE, *,
+                          target: float = PRECISION_TARGET, max_size: int = MAX_VALIDATION_SIZE) -> Rollout:
+    """The control-variate estimate on the first ``size`` validation draws, extended until precise.
+
+    While the relative standard error exceeds ``target``, the rollout continues on
+    the next validation draws (doubling the count, up to ``max_size``): validation
+    sets are nested, so the first ``size`` draws, which every method shares, stay
+    in the estimate, and a well-behaved controller costs no extra rollout. A
+    heavy-tailed cost (a closed loop close to unstable) may stop at ``max_size``
+    above the target; its standard error says so. ``Rollout.costs`` holds every draw used.
+    """
+    if max_size < size:
+        raise ValueError(f"max_size must be at least size ({size}), got {max_size}")
+    x0 = validation_set(instance, size)
+    rollout = simulate(instance, controller, x0, control_variates=True)
+    while (rollout.bounded and np.isfinite(rollout.cost) and size < max_size
+           and rollout.stderr > target * abs(rollout.cost)):
+        size = min(2 * size, max_size)
+        every = validation_set(instance, size)
+        more = simulate(instance, controller, every[x0.shape[0]:], control_variates=False)
+        x0 = every
+        costs = np.concatenate([rollout.costs, more.costs])
+        if not more.bounded:
+            inf = float("inf")
+            return Rollout(inf, inf, costs, False, more.max_state, rollout.steps, inf, inf)
+        cost, stderr, estimator = control_variate_estimate(instance, x0, costs)
+        rollout = Rollout(cost, stderr, costs, True, max(rollout.max_state, more.max_state), rollout.steps,
+                          float(costs.mean()), float(costs.std(ddof=1) / np.sqrt(costs.size)), estimator)
+    return rollout
 
 
 def impulse_responses(instance, controller, steps: int | None = None):

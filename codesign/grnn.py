@@ -22,7 +22,8 @@ import numpy as np
 from .controllers import register_controller
 from .design import Design, count_links
 from .instances import node_ranks
-from .evaluation import exact_cost, impulse_responses, simulate, spectral_radius, validation_set
+from .evaluation import (exact_cost, impulse_responses, simulate, simulate_to_precision, spectral_radius,
+                         validation_set)
 from .methods import method
 from .training import ACTIVATIONS, DTYPES, ModelSpec, init_fwg, train_stack
 
@@ -469,7 +470,7 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
     extras["spectral_radius"] = spectral_radius(controller.linearized_closed_loop(job.instance))
     if linear:
         return _finish_linear(job, controller, first, links, self_loops, seconds, extras)
-    rollout = simulate(job.instance, controller)
+    rollout = simulate_to_precision(job.instance, controller)
     extras.update(rollout.summary())
     steps = int(job.settings["stability_steps"])
     if steps:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import compare.registry  # noqa: F401  (the built-ins)
-from codesign import get_method, paper_instance
+from codesign import get_method, paper_instance, simulate, validation_set
 
 REFERENCE = json.loads((Path(__file__).parent / "data" / "p1_reference.json").read_text())
 LEARNED = {"grnn", "grnn_sparse", "gcnn"}
@@ -34,4 +34,9 @@ def test_numbers_are_unchanged(instance, name):
     for got, want in zip(designs, expected):
         assert (got.status, got.links, got.self_loops, got.cost_kind) == (
             want["status"], want["links"], want["self_loops"], want["cost_kind"])
-        np.testing.assert_allclose(got.cost, want["cost"], rtol=rtol)
+        cost = got.cost
+        if name in LEARNED:
+            # The reference scored on the first 2000 validation draws; rollouts now continue on
+            # further draws until precise, so the trained controller is compared on those 2000.
+            cost = simulate(instance, got.controller, validation_set(instance, 2000), control_variates=True).cost
+        np.testing.assert_allclose(cost, want["cost"], rtol=rtol)

@@ -25,7 +25,7 @@ PRESET_TIMES = {
     "table1-small": "~1-2 min (estimated from table1's per-run times, not measured)",
     "table1": "~31 min (1871 s measured)",
     "tradeoff": "~82 min (4909 s measured)",
-    "systems": "~14 min (estimated from per-method times at N = 20, not measured)",
+    "systems": "~23 min (1405 s measured)",
 }
 
 

@@ -7,6 +7,8 @@ unless the costs span more than a decade.
 
 from __future__ import annotations
 
+import textwrap
+
 import matplotlib
 
 matplotlib.use("Agg")
@@ -148,8 +150,9 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
         ax.set_xlim(-0.4, right * 1.15 + 1)
         ax.set_xlabel("link budget L (directed off-diagonal links)")
         ax.set_ylabel("best cost with ≤ L links (median, 25–75 %)")
-        ax.set_title(panel_title(panel) + ("\nabove the axis: " + ", ".join(above[panel]) if panel in above else ""),
-                     fontsize=10 if panel in above else None)
+        # Wrapped to the panel's width: with several panels side by side a long list ran into the next title.
+        note = textwrap.fill("above the axis: " + ", ".join(above[panel]), 60) if panel in above else ""
+        ax.set_title(panel_title(panel) + ("\n" + note if note else ""), fontsize=10 if note else None)
         ax.axhline(1.0, color="0.6", linewidth=0.8, zorder=0)
         if bounds and panel in bounds:
             value, text = bounds[panel]

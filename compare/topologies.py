@@ -35,7 +35,7 @@ def plot_topology_path(instance, path, *, axes=None):
     ----------
     instance : codesign.Instance
         Its plant graph is drawn first; nodes are coloured by the magnitude of
-        the leading eigenvector of A.
+        the leading eigenvector of A (its norm over the node's states).
     path : list of (weight, links, cost, support)
         One entry per regularization weight, support as an (n, n) array
         (nonzero = link).
@@ -53,13 +53,15 @@ def plot_topology_path(instance, path, *, axes=None):
         fig = axes[0].figure
     pos = nx.kamada_kawai_layout(nx.from_numpy_array((instance.comm_adj != 0).astype(int)))
     colors = _leading_eigenvector(instance.A)
+    if colors.size != instance.nodes:  # several states per node: the norm of each node's entries
+        colors = np.sqrt(np.bincount(instance.state_nodes, weights=colors**2, minlength=instance.nodes))
     plant_links = int(np.count_nonzero(instance.plant_adj) - np.count_nonzero(np.diag(instance.plant_adj)))
     nodes = _draw(axes[0], instance.plant_adj, pos, colors, f"plant graph\n|E| = {plant_links}")
     for ax, (weight, links, cost, support) in zip(axes[1:], path):
         _draw(ax, np.asarray(support), pos, colors, f"β = {weight:.3g}\n|E| = {links}, J = {cost:.3f}")
     fig.tight_layout()
     bar = fig.colorbar(nodes, ax=list(axes), fraction=0.015, pad=0.01)
-    bar.set_label("|leading eigenvector of A|", fontsize=7)
+    bar.set_label("|leading eigenvector of A| at each node", fontsize=7)
     bar.ax.tick_params(labelsize=6)
     return fig, axes
 

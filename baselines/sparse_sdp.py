@@ -49,7 +49,6 @@ import warnings
 from dataclasses import replace
 
 import numpy as np
-import scipy.sparse
 
 from codesign.design import Design, solver_status
 from codesign.methods import method
@@ -149,6 +148,8 @@ class SparseSDP:
             cols.extend(entries)
         objective = cp.trace(instance.Q @ X) + sum(smooth)
         if pairs:
+            import scipy.sparse  # imported on use, like every heavy package (fast CLI)
+
             select = scipy.sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(size * len(pairs), m * n))
             groups = cp.reshape(select @ cp.vec(self.Y, order="F"), (size, len(pairs)), order="F")
             objective = objective + self.gamma * cp.sum(cp.norm(groups, 2, axis=0))

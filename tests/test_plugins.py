@@ -205,12 +205,12 @@ def test_validation_size_reaches_learned_methods(tmp_path):
         degree = 3
         horizon = 8
         [evaluation]
-        validation_size = 40
+        validation_size = 4000
         [[methods]]
         method = "gcnn"
         params = { steps = 2, ensemble = 1, stability_steps = 0 }
     ''')
-    from codesign import simulate, validation_set
+    from codesign.evaluation import simulate_to_precision
     from compare.runner import build_instance
 
     with Store(tmp_path / "v.sqlite") as store:
@@ -218,8 +218,9 @@ def test_validation_size_reaches_learned_methods(tmp_path):
         (record,) = store.records()
         controller = store.controller(record["run_key"])
         instance = build_instance(record["instance"])
-    assert record["extras"]["validation_size"] == 40
-    assert record["cost"] == pytest.approx(simulate(instance, controller, validation_set(instance, 40)).cost, rel=1e-12)
+    # The GCNN scores itself on 2000 draws; the spec asks for at least 4000: the harness re-scores.
+    assert record["extras"]["validation_size"] >= 4000
+    assert record["cost"] == pytest.approx(simulate_to_precision(instance, controller, 4000).cost, rel=1e-12)
 
 
 def test_two_runs_at_once_never_compute_a_run_twice(tmp_path):

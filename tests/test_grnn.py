@@ -19,12 +19,10 @@ from codesign.grnn import GRNNController, LinearGRNNController, _selection_set
 from codesign.training import (
     ModelSpec,
     clip_coefficients,
-    _Problem,
-    grnn_loss_and_grad,
     init_fwg,
-    loss_autograd,
     train_stack,
 )
+from references import assert_bptt_matches_autograd  # tests/references.py
 
 
 @pytest.fixture(scope="module")
@@ -55,21 +53,8 @@ def test_hand_written_bptt_matches_autograd(inst, unstable, activation):
     custom = Instance.from_matrices(inst.A, inst.B, Q=Q, R=2.0 * np.eye(inst.n), comm_adj=inst.comm_adj)
     specs = [_spec(inst, 0, beta=0.3), _spec(unstable, 1, penalty=(1.0, 0.5, 0.7, 2.0)),
              _spec(custom, 2, S0=rng.random((inst.n, inst.n)), mask=np.ones((inst.n, inst.n), bool))]
-    prob = _Problem(specs, torch.float64)
-    tensors = [torch.tensor(np.stack([getattr(s, name) for s in specs])) for name in ("S0", "F0", "W0", "G0")]
-    x0 = torch.tensor(rng.standard_normal((3, 6, inst.n)))
-    penalty = torch.tensor([s.penalty for s in specs])
-    beta = torch.tensor([s.beta for s in specs])
-    leaves = [t.clone().requires_grad_(True) for t in tensors]
-    reference = loss_autograd(prob, *leaves, x0, penalty=penalty, beta=beta, horizon=inst.horizon,
-                              activation=activation)
-    reference.sum().backward()
-    loss, grads = grnn_loss_and_grad(prob, *tensors, x0, penalty=penalty, beta=beta, horizon=inst.horizon,
-                                     activation=activation)
-    np.testing.assert_allclose(loss.numpy(), reference.detach().numpy(), rtol=1e-12)
-    for leaf, grad in zip(leaves, grads):
-        scale = leaf.grad.abs().max().item()
-        np.testing.assert_allclose(grad.numpy(), leaf.grad.numpy(), rtol=0, atol=1e-11 * scale)
+    assert_bptt_matches_autograd(specs, rng.standard_normal((3, 6, inst.n)), horizon=inst.horizon,
+                                 activation=activation)
 
 
 def test_support_is_respected_exactly(inst):

@@ -24,6 +24,7 @@ from codesign import compare_exact_and_simulated, count_links, get_method
 from codesign.controllers import controller_from_arrays
 from codesign.evaluation import exact_cost, simulate, spectral_radius
 from compare.families.mass_spring import mass_spring_instance
+from references import augmented_delayed_reference  # tests/references.py
 
 # `baselines.sparse_delayed` resolves to the function once a package imports it; the module by full name.
 delayed_module = importlib.import_module("baselines.sparse_delayed")
@@ -36,34 +37,6 @@ def _random_block_gain(instance, rng, scale=0.2):
     K_local = np.where(own, -0.3 + 0.1 * rng.standard_normal(own.shape), 0.0)
     K_delayed = np.where(own, 0.0, scale * rng.standard_normal(own.shape))
     return K_local, K_delayed
-
-
-def _augmented_reference(instance, K_local, K_delayed):
-    """Cost and gradient of the augmented loop z = [x; x_prev] by its Lyapunov recursion (m x n gains).
-
-    M = [[A + B Kl, B Kd], [I, 0]], stage cost z'(Qbar + C'RC)z with C = [Kl, Kd],
-    terminal x(T)'P x(T), z(0) = [x0; 0]; the gradient over C is
-    sum_t 2 (R C + Bbar' Pi_{t+1} M) Sigma_t with Bbar = [B; 0] (2n x m).
-    """
-    n, m, T = instance.n, instance.m, instance.horizon
-    C = np.hstack([K_local, K_delayed])
-    M = delayed_closed_loop(instance, K_local, K_delayed)
-    Bbar = np.vstack([instance.B, np.zeros((n, m))])
-    S = C.T @ instance.R @ C
-    S[:n, :n] += instance.Q
-    Pis = [None] * (T + 1)
-    Pis[T] = np.zeros((2 * n, 2 * n))
-    Pis[T][:n, :n] = instance.P
-    for t in range(T - 1, -1, -1):
-        Pis[t] = S + M.T @ Pis[t + 1] @ M
-    sigma = np.zeros((2 * n, 2 * n))
-    sigma[:n, :n] = np.eye(n)
-    grad = np.zeros((m, 2 * n))
-    for t in range(T):
-        grad += 2.0 * (instance.R @ C + Bbar.T @ Pis[t + 1] @ M) @ sigma
-        sigma = M @ sigma @ M.T
-    scale = instance.trace_P
-    return np.trace(Pis[0][:n, :n]) / scale, grad[:, :n] / scale, grad[:, n:] / scale
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +62,7 @@ def test_cost_and_gradient_match_the_augmented_recursion_with_fewer_inputs_than_
     assert g_local.shape == g_delayed.shape == (4, 8)
     own = small.block_mask()
     assert not g_local[~own].any() and not g_delayed[own].any()
-    ref_cost, ref_local, ref_delayed = _augmented_reference(small, K_local, K_delayed)
+    ref_cost, ref_local, ref_delayed = augmented_delayed_reference(small, K_local, K_delayed)
     assert cost == pytest.approx(ref_cost, rel=1e-12)
     scale = max(np.abs(ref_local).max(), np.abs(ref_delayed).max())
     np.testing.assert_allclose(g_local[own], ref_local[own], rtol=0, atol=1e-12 * scale)

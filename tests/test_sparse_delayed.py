@@ -27,6 +27,7 @@ from codesign.evaluation import (
 )
 from codesign.instances import paper_instance
 from codesign.methods import registered_methods
+from references import augmented_delayed_reference  # tests/references.py
 
 # `baselines.sparse_delayed` resolves to the function once a package imports it; the module by full name.
 delayed_module = importlib.import_module("baselines.sparse_delayed")
@@ -40,35 +41,6 @@ def _random_gain(n, rng, scale=0.2):
     K_delayed = scale * rng.standard_normal((n, n))
     np.fill_diagonal(K_delayed, 0.0)
     return K_local, K_delayed
-
-
-def _augmented_reference(instance, K_local, K_delayed):
-    """The augmented system's finite-horizon Lyapunov recursion, written out as in the issue.
-
-    z = [x; x_prev], z(t+1) = M z(t), M = [[A + B Kl, B Kd], [I, 0]], stage cost
-    z'[[Q + Kl'R Kl, Kl'R Kd], [Kd'R Kl, Kd'R Kd]] z, terminal x(T)'P x(T),
-    z(0) = [x0; 0] with x0 ~ N(0, I). With C = [Kl, Kd] and Bbar = [B; 0] the
-    gradient over C is sum_t 2 (R C + Bbar' Pi_{t+1} M) Sigma_t.
-    """
-    n, T = instance.n, instance.horizon
-    C = np.hstack([K_local, K_delayed])
-    M = delayed_closed_loop(instance, K_local, K_delayed)
-    Bbar = np.vstack([instance.B, np.zeros((n, n))])
-    S = C.T @ instance.R @ C
-    S[:n, :n] += instance.Q
-    Pis = [None] * (T + 1)
-    Pis[T] = np.zeros((2 * n, 2 * n))
-    Pis[T][:n, :n] = instance.P
-    for t in range(T - 1, -1, -1):
-        Pis[t] = S + M.T @ Pis[t + 1] @ M
-    sigma = np.zeros((2 * n, 2 * n))
-    sigma[:n, :n] = np.eye(n)
-    grad = np.zeros((n, 2 * n))
-    for t in range(T):
-        grad += 2.0 * (instance.R @ C + Bbar.T @ Pis[t + 1] @ M) @ sigma
-        sigma = M @ sigma @ M.T
-    scale = instance.trace_P
-    return np.trace(Pis[0][:n, :n]) / scale, grad[:, :n] / scale, grad[:, n:] / scale
 
 
 # -- cost and gradient ---------------------------------------------------------------
@@ -97,7 +69,7 @@ def test_cost_and_gradient_match_the_augmented_lyapunov_recursion():
     inst = paper_instance(1, n=8, a_norm=0.995, horizon=20)
     K_local, K_delayed = _random_gain(inst.n, np.random.default_rng(1))
     cost, g_local, g_delayed = delayed_gain_cost_and_grad(inst, K_local, K_delayed)
-    ref_cost, ref_local, ref_delayed = _augmented_reference(inst, K_local, K_delayed)
+    ref_cost, ref_local, ref_delayed = augmented_delayed_reference(inst, K_local, K_delayed)
     assert cost == pytest.approx(ref_cost, rel=1e-12)
     scale = np.abs(ref_delayed).max()
     assert np.allclose(g_local, np.diag(np.diag(ref_local)), rtol=0, atol=1e-12 * scale)

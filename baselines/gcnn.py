@@ -45,7 +45,7 @@ import numpy as np
 
 from codesign.controllers import register_controller
 from codesign.design import Design, count_links
-from codesign.instances import node_ranks
+from codesign.instances import node_ranks, node_width
 from codesign.evaluation import simulate, simulate_to_precision, spectral_radius, validation_set
 from codesign.methods import method
 from codesign._lazy import lazy_import
@@ -58,12 +58,6 @@ __all__ = ["gcnn", "gcnn_batch", "GCNNController", "GCNN_TAPS", "GCNN_FEATURES"]
 GCNN_TAPS = 5
 GCNN_FEATURES = 32
 _DATA, _INIT, _SELECT = 21, 22, 0xC0DE
-
-
-def _channels(nodes, N: int) -> int:
-    """Most entries at one node (at least 1): the padded per-node width."""
-    nodes = np.asarray(nodes, dtype=int)
-    return max(1, int(np.bincount(nodes, minlength=N).max())) if nodes.size else 1
 
 
 def _scatter(nodes, N: int, width: int) -> np.ndarray:
@@ -454,7 +448,7 @@ def _layout(instance):
     if _fast(instance):
         return None
     N = instance.nodes
-    return (instance.m, N, _channels(instance.state_nodes, N), _channels(instance.input_nodes, N))
+    return (instance.m, N, node_width(instance.state_nodes), node_width(instance.input_nodes))
 
 
 @dataclass

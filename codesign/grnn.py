@@ -21,7 +21,7 @@ import numpy as np
 
 from .controllers import register_controller
 from .design import Design, count_links
-from .instances import node_ranks
+from .instances import node_ranks, node_width
 from .evaluation import (exact_cost, impulse_responses, simulate, simulate_to_precision, spectral_radius,
                          validation_set)
 from .methods import method
@@ -42,8 +42,7 @@ def _slot_index(owners, nodes: int) -> tuple[np.ndarray, int]:
     Slot c of node i is entry c N + i: with one entry per node the layout is the plain one.
     """
     owners = np.asarray(owners, dtype=int)
-    ranks = node_ranks(owners)
-    return ranks * nodes + owners, int(ranks.max()) + 1 if owners.size else 1
+    return node_ranks(owners) * nodes + owners, node_width(owners)
 
 
 @register_controller("grnn")

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Instance", "InstanceError", "paper_instance", "hop_distances", "node_ranks"]
+__all__ = ["Instance", "InstanceError", "paper_instance", "hop_distances", "node_ranks", "node_width"]
 
 
 class InstanceError(ValueError):
@@ -309,6 +309,12 @@ def node_ranks(owners) -> np.ndarray:
         where = np.flatnonzero(owners == node)
         ranks[where] = np.arange(where.size)
     return ranks
+
+
+def node_width(owners) -> int:
+    """Most entries at one node (at least 1): the common width node signals are padded to."""
+    owners = np.asarray(owners, dtype=int)
+    return int(np.bincount(owners).max()) if owners.size else 1
 
 
 def _one_hot(owners, nodes: int) -> np.ndarray:

@@ -349,10 +349,9 @@ def _norm(p):
     return p.reshape(p.shape[0], -1).norm(dim=1)
 
 
-def _node_sizes(prob, S) -> tuple[int, int, int]:
+def _node_sizes(prob, nodes: int) -> tuple[int, int, int]:
     """Nodes N and padded states p and inputs q per node of a stacked problem."""
-    N = S.shape[1]
-    return N, prob.A.shape[1] // N, prob.B.shape[2] // N
+    return nodes, prob.A.shape[1] // nodes, prob.B.shape[2] // nodes
 
 
 def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None, activation="tanh"):
@@ -381,7 +380,7 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None,
         dS, dF, dW, dG (dS unmasked), shaped like S, F, W, G.
     """
     M, Bsz = x0.shape[:2]
-    N, p, q = _node_sizes(prob, S)
+    N, p, q = _node_sizes(prob, S.shape[1])
     h = W.shape[1]
     if ws is None:
         ws = _Workspace(M, N, Bsz, h, horizon, S.dtype, keep=True, p=p, q=q)
@@ -461,7 +460,7 @@ def loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon, activation="t
     ``x0`` has shape (M, B, p N) as in :func:`grnn_loss_and_grad`.
     """
     M, Bsz = x0.shape[:2]
-    N, p, q = _node_sizes(prob, S)
+    N, p, q = _node_sizes(prob, S.shape[1])
     h = W.shape[1]
     x = x0.transpose(1, 2)  # (M, p N, B): states slot-major
     F3, G3 = F.reshape(M, p, h), G.reshape(M, h, q)
@@ -488,7 +487,7 @@ def rollout_cost(prob, S, F, W, G, x0, horizon, ws=None, activation="tanh") -> t
     """Mean normalized cost per model on the initial conditions x0 (M, B, p N)."""
     M, Bsz = x0.shape[:2]
     if ws is None:
-        N, p, q = _node_sizes(prob, S)
+        N, p, q = _node_sizes(prob, S.shape[1])
         ws = _Workspace(M, N, Bsz, W.shape[1], horizon, S.dtype, keep=False, p=p, q=q)
     J = _forward(prob, S, F, W, G, x0, horizon, ws, activation)
     return J / Bsz / prob.trace_P
@@ -530,7 +529,7 @@ def train_stack(
         return []
     N = specs[0].S0.shape[0]
     prob = _Problem(specs, tdt)
-    _, p, q = _node_sizes(prob, torch.empty(1, N, N))
+    _, p, q = _node_sizes(prob, N)
     padded = p * N
     placements = [np.arange(padded) if s.state_index is None else np.asarray(s.state_index) for s in specs]
     if len({len(k) for k in placements}) != 1:

@@ -79,21 +79,16 @@ class SpecError(ValueError):
 
 @dataclass(frozen=True)
 class InstanceSpec:
-    """Which instances to build: the family's name and one instance spec (a JSON-able dict) per instance.
+    """Which instances to build: the families named and one instance spec (a JSON-able dict) per instance.
 
     The family (:mod:`compare.families`) parses the spec's ``[instances]`` table
     into these and builds each :class:`codesign.Instance` where a run executes.
-    ``[[instances]]`` (a list of tables) joins several families in one
-    experiment; ``family`` is then their names joined by ``+``.
+    ``families`` names them in order: several when ``[[instances]]`` (a list of
+    tables) joins several families in one experiment.
     """
 
-    family: str = "paper"
+    families: tuple = ("paper",)
     specs: tuple = ()
-
-    @property
-    def families(self) -> tuple[str, ...]:
-        """The families named, in order (several when ``[[instances]]`` is a list of tables)."""
-        return tuple(self.family.split("+"))
 
     def expand(self) -> list[dict]:
         """The instance specs, one dict per instance (``"family"`` included)."""
@@ -329,7 +324,7 @@ def _parse_instances(table, base) -> InstanceSpec:
             raise SpecError(f"{where}.family: {exc}") from None
         names.append(name)
         specs.extend(family.parse(entry, base))
-    return InstanceSpec(family="+".join(dict.fromkeys(names)), specs=tuple(specs))
+    return InstanceSpec(families=tuple(dict.fromkeys(names)), specs=tuple(specs))
 
 
 def _parse_evaluation(table: dict) -> EvaluationSpec:

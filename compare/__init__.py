@@ -3,6 +3,7 @@
 Public names::
 
     from compare import load_spec, run_experiment, Store, write_report, methods, method
+    from compare import Records, DesignRecord, InstanceRecord   # what Store.records() hands out
     from compare import designs_frame       # Store.records() as one pandas table (the `analysis` extra)
 """
 
@@ -34,6 +35,9 @@ _EXPORTS = {
     "aggregate": "report",
     "plot_cost_vs_links": "report",
     "write_report": "report",
+    "Records": "records",
+    "DesignRecord": "records",
+    "InstanceRecord": "records",
     "designs_frame": "export",
     "write_designs": "export",
     "MissingExtra": "export",

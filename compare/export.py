@@ -1,7 +1,8 @@
 """Stored designs as one analysis table: a row per design, settings as columns.
 
 :func:`designs_frame` turns :meth:`Store.records` into a pandas DataFrame;
-:meth:`Store.to_pandas` and ``compare export`` both use it. Columns, in order:
+:meth:`Store.to_pandas`, :meth:`Records.to_pandas <compare.records.Records.to_pandas>`
+and ``compare export`` all use it. Columns, in order:
 
 * ``experiment`` (the experiment that computed the run), ``experiments`` (the
   experiments whose latest ``compare run`` names it, comma-separated),
@@ -38,6 +39,8 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+
+from .records import as_records
 
 __all__ = ["FORMATS", "MissingExtra", "require_pandas", "designs_frame", "write_designs"]
 
@@ -97,13 +100,14 @@ def _column(pd, values: list, *, numbers: str):
     return pd.Series([None if v is None else json.dumps(v, sort_keys=True) for v in values], dtype=object)
 
 
-def designs_frame(records: list[dict], members: dict | None = None):
+def designs_frame(records, members: dict | None = None):
     """The analysis table of ``records`` (:meth:`Store.records`): one row per design.
 
     Parameters
     ----------
-    records : list of dict
-        Stored designs as :meth:`Store.records` gives them (only current designs).
+    records : Records or list of dict
+        Stored designs as :meth:`Store.records` gives them (only current designs),
+        or dicts shaped like the store's rows.
     members : dict, optional
         :meth:`Store.members`, experiment name -> run keys, for the ``experiments``
         column; without it (or for a run no experiment lists) the run's own experiment.
@@ -114,41 +118,41 @@ def designs_frame(records: list[dict], members: dict | None = None):
         Columns as in the module docstring, rows in the order of ``records``.
     """
     pd = require_pandas()
+    records = as_records(records)
     in_experiments: dict[str, list[str]] = {}
     for name, keys in sorted((members or {}).items()):
         for key in keys:
             in_experiments.setdefault(key, []).append(name)
 
-    instance_keys = list(dict.fromkeys(k for r in records for k in r.get("instance", {})))
+    instance_keys = list(dict.fromkeys(k for inst in records.instances for k in inst.spec))
     instance_keys = [k for k in _INSTANCE_ORDER if k in instance_keys] + sorted(
         k for k in instance_keys if k not in _INSTANCE_ORDER)
     reserved = set(_IDENTITY) | set(_OUTCOME) | set(instance_keys) | {"params"}
-    param_keys = sorted({k for r in records for k in r.get("params", {})})
+    param_keys = sorted({k for r in records for k in r.params})
     param_columns = {k: f"param_{k}" if k in reserved else k for k in param_keys}
     extras_seen: dict[str, bool] = {}
     for r in records:
-        for key, value in r.get("extras", {}).items():
+        for key, value in r.extras.items():
             extras_seen[key] = extras_seen.get(key, True) and _is_scalar(value)
     extra_keys = sorted(k for k, scalar in extras_seen.items() if scalar)
 
     columns = {}
-    columns["experiment"] = _column(pd, [r.get("experiment") for r in records], numbers="int")
+    columns["experiment"] = _column(pd, [r.experiment for r in records], numbers="int")
     columns["experiments"] = _column(
-        pd, [",".join(in_experiments.get(r["run_key"], [r.get("experiment")] if r.get("experiment") else []))
-             for r in records], numbers="int")
+        pd, [",".join(in_experiments.get(r.run_key, [r.experiment] if r.experiment else [])) for r in records],
+        numbers="int")
     for key in ("run_key", "idx", "method", "label"):
-        columns[key] = _column(pd, [r.get(key) for r in records], numbers="int")
+        columns[key] = _column(pd, [getattr(r, key) for r in records], numbers="int")
     for key in instance_keys:
-        columns[key] = _column(pd, [r.get("instance", {}).get(key) for r in records], numbers="int")
+        columns[key] = _column(pd, [r.instance.spec.get(key) for r in records], numbers="int")
     for key in _OUTCOME:
         numbers = "float" if key in ("cost", "cost_stderr", "seconds") else "int"
-        columns[key] = _column(pd, [r.get(key) for r in records], numbers=numbers)
+        columns[key] = _column(pd, [getattr(r, key) for r in records], numbers=numbers)
     for key, name in param_columns.items():
-        columns[name] = _column(pd, [r.get("params", {}).get(key) for r in records], numbers="float")
-    columns["params"] = _column(pd, [json.dumps(r.get("params", {}), sort_keys=True) for r in records],
-                                numbers="float")
+        columns[name] = _column(pd, [r.params.get(key) for r in records], numbers="float")
+    columns["params"] = _column(pd, [r.params_key for r in records], numbers="float")
     for key in extra_keys:
-        columns[f"extra_{key}"] = _column(pd, [r.get("extras", {}).get(key) for r in records], numbers="float")
+        columns[f"extra_{key}"] = _column(pd, [r.extras.get(key) for r in records], numbers="float")
     return pd.DataFrame(columns, index=pd.RangeIndex(len(records)))
 
 

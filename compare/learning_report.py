@@ -1,18 +1,17 @@
 """Paper Table 1 and the training-curve figure (paper Fig. 2) from stored records.
 
-``records`` are dicts with keys ``instance`` (dict with ``a_norm``, ``seed``, ...),
-``label``, ``method``, ``params``, ``cost``, ``cost_stderr``, ``links``,
-``self_loops``, ``info_model``, ``status`` and ``extras`` (where learned
-controllers keep ``extras["curve"] = {"step": [...], "cost": [...]}``).
+``records`` are :class:`compare.records.Records` (or dicts shaped like the store's
+rows); learned controllers keep ``extras["curve"] = {"step": [...], "cost": [...]}``.
 """
 
 from __future__ import annotations
 
-import json
 from collections import defaultdict
 
 import numpy as np
 import scipy.stats
+
+from .records import OK_STATUSES, as_records
 
 __all__ = ["table1_markdown", "training_curves_figure", "bootstrap_interval", "PAPER_TABLE1", "PAPER_SPARSE_EDGES",
            "GAP_NOTES", "SPARSE_EDGES_NOTE"]
@@ -81,20 +80,9 @@ def _gap_note(method, stat, paper, low, high) -> str:
 _ROW_ORDER = ["lqr", "autonomous", "grnn", "grnn_dense", "grnn_sparse", "grnn_fixed", "gcnn"]
 
 
-def _extras(record) -> dict:
-    extras = record.get("extras") or {}
-    return json.loads(extras) if isinstance(extras, str) else extras
-
-
 def _a_norm(record) -> float:
-    instance = record.get("instance") or {}
-    if isinstance(instance, str):
-        instance = json.loads(instance)
-    return float(instance.get("a_norm", float("nan")))
-
-
-def _ok(record) -> bool:
-    return record.get("status") in ("optimal", "inaccurate") and np.isfinite(record.get("cost", np.nan))
+    a_norm = record.instance.a_norm
+    return float("nan") if a_norm is None else float(a_norm)
 
 
 def _fmt(value, digits=3) -> str:
@@ -130,9 +118,8 @@ def table1_markdown(records) -> str:
     our interval is listed with what is known to cause the gap
     (:data:`GAP_NOTES`).
     """
-    groups: dict[tuple, list] = defaultdict(list)
-    for record in records:
-        groups[(record.get("method"), record.get("label") or record.get("method"))].append(record)
+    records = as_records(records)
+    groups = records.group(lambda r: (r.method, r.label or r.method))
     a_norms = sorted({_a_norm(r) for r in records if np.isfinite(_a_norm(r))})
     if not groups or not a_norms:
         return "_No records for Table 1._\n"
@@ -153,19 +140,19 @@ def table1_markdown(records) -> str:
         cells = [label]
         for a in a_norms:
             here = [r for r in rows if _a_norm(r) == a]
-            good = [r for r in here if _ok(r)]
-            costs = np.array([r["cost"] for r in good], dtype=float)
+            good = [r for r in here if r.ok]
+            costs = np.array([r.cost for r in good], dtype=float)
             statistic = np.mean if method == "autonomous" else np.median
             stat = float(statistic(costs)) if costs.size else float("nan")
             low, high = bootstrap_interval(costs, statistic)
             interval = f"[{_fmt(low)}, {_fmt(high)}]" if np.isfinite(low) else "–"
-            linear = any(r.get("params", {}).get("activation") == "identity" for r in rows)
+            linear = any(r.params.get("activation") == "identity" for r in rows)
             paper = None if linear else PAPER_TABLE1.get(method, {}).get(a)
             gap = f"{100 * (stat / paper - 1):+.1f} %" if paper and np.isfinite(stat) else "–"
             if paper and np.isfinite(low) and not low <= paper <= high:
                 outside.append((method, label, a, stat, paper, low, high))
-            links = np.array([r.get("links", np.nan) for r in good], dtype=float)
-            loops = np.array([r.get("self_loops", np.nan) for r in good], dtype=float)
+            links = np.array([np.nan if r.links is None else r.links for r in good], dtype=float)
+            loops = np.array([np.nan if r.self_loops is None else r.self_loops for r in good], dtype=float)
             if links.size:
                 link_cell = f"{links.mean():.1f} ({(links + loops).mean():.1f})"
             else:
@@ -179,10 +166,10 @@ def table1_markdown(records) -> str:
             cells += [_fmt(stat), interval, _fmt(paper) if paper else "–", gap, f"{len(good)}/{len(here)}",
                       link_cell]
         lines.append("| " + " | ".join(cells) + " |")
-        if any(r.get("status") not in ("optimal", "inaccurate") for r in rows):
+        if any(r.status not in OK_STATUSES for r in rows):
             statuses = defaultdict(int)
             for r in rows:
-                statuses[r.get("status")] += 1
+                statuses[r.status] += 1
             notes.append(f"{label}: " + ", ".join(f"{v} {k}" for k, v in sorted(statuses.items())))
     text = "\n".join(lines) + "\n"
     text += ("\nCosts: E[J]/trace(P), exact for linear controllers and a control-variate estimate on the "
@@ -212,17 +199,17 @@ def _variant_pairs(records, a_norms) -> str:
     """Paired differences between the GRNN variants, instance by instance."""
     from .statistics import paired_difference
 
-    variants = [m for m in _ROW_ORDER if m.startswith("grnn") and any(r.get("method") == m for r in records)]
+    variants = [m for m in _ROW_ORDER if m.startswith("grnn") and any(r.method == m for r in records)]
     if len(variants) < 2:
         return ""
-    label = {r["method"]: r.get("label") or r["method"] for r in records}
+    label = {r.method: r.label or r.method for r in records}
     lines = ["", "Paired differences between the GRNN variants (first minus second, per instance; negative: the "
              "first is better): instances where each is better, median difference and a distribution-free 95 % "
              "interval for it.", "", "| pair | ‖A‖ | instances | first better | second better | median Δ | 95 % interval | |",
              "|---|---|---:|---:|---:|---:|---|---|"]
     for a in a_norms:
-        costs = {m: {json.dumps(r["instance"], sort_keys=True): r["cost"] for r in records
-                     if r.get("method") == m and _a_norm(r) == a and _ok(r)} for m in variants}
+        costs = {m: {r.instance.key: r.cost for r in records if r.method == m and _a_norm(r) == a and r.ok}
+                 for m in variants}
         keys = sorted(set().union(*(c.keys() for c in costs.values())))
         for i, first in enumerate(variants):
             for second in variants[i + 1:]:
@@ -242,7 +229,7 @@ def training_curves_figure(records, ax=None):
 
     Parameters
     ----------
-    records : list of dict
+    records : Records or list of dict
         Records whose ``extras["curve"]`` holds ``step`` and ``cost`` lists;
         others are ignored.
     ax : matplotlib Axes or sequence of Axes, optional
@@ -257,11 +244,11 @@ def training_curves_figure(records, ax=None):
     import matplotlib.pyplot as plt
 
     curves: dict[float, dict[str, list]] = defaultdict(lambda: defaultdict(list))
-    for record in records:
-        curve = _extras(record).get("curve")
-        if not curve or not _ok(record):
+    for record in as_records(records):
+        curve = record.extras.get("curve")
+        if not curve or not record.ok:
             continue
-        curves[_a_norm(record)][record.get("label") or record.get("method")].append(curve)
+        curves[_a_norm(record)][record.label or record.method].append(curve)
     a_norms = sorted(curves)
     if ax is None:
         fig, axes = plt.subplots(1, max(1, len(a_norms)), figsize=(6 * max(1, len(a_norms)), 4.2), squeeze=False)

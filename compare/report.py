@@ -10,6 +10,7 @@ import csv
 import json
 import platform
 from collections import Counter, defaultdict
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,7 +37,8 @@ __all__ = [
 from .figures import (LINESTYLES, OFF_SCALE, _grid, cost_axis, draw_boundary, finish_legend,  # noqa: E402
                       label_styles, legend_handles, plot_budget_fronts)
 from .statistics import _quantiles, best_tables, budget_fronts, paired_comparisons, paired_difference  # noqa: E402
-from .statistics import panel_key, panel_title  # noqa: E402
+from .statistics import panel_title  # noqa: E402
+from .records import OK_STATUSES, Records, as_records  # noqa: E402
 
 #: Line style per information model, so that a zero-delay static gain and a
 #: one-step-delay dynamic controller with the same link count never look alike.
@@ -56,12 +58,16 @@ def quartiles(values) -> tuple[float, float, float]:
 
 @dataclass(frozen=True)
 class Point:
-    """One design setting (label + hyperparameters) aggregated over instances."""
+    """One design setting (label + hyperparameters) aggregated over instances.
+
+    ``params`` are the setting's hyperparameters; ``params_key``, their canonical JSON, orders settings.
+    """
 
     panel: tuple
     label: str
     info_model: str
-    params: str
+    params: Mapping
+    params_key: str
     designs: int
     ok: int
     links: tuple[float, float, float]
@@ -71,28 +77,30 @@ class Point:
     statuses: dict
 
 
-def aggregate(records: list[dict]) -> list[Point]:
-    """Group records by (panel, label, info model, params) into quartile summaries."""
-    groups: dict[tuple, list[dict]] = defaultdict(list)
-    for r in records:
-        groups[(panel_key(r["instance"]), r["label"], r["info_model"], json.dumps(r["params"], sort_keys=True))].append(r)
+def aggregate(records) -> list[Point]:
+    """Group records by (panel, label, info model, params) into quartile summaries.
+
+    ``records``: :class:`~compare.records.Records`, or dicts shaped like the store's rows.
+    """
+    groups = as_records(records).group(lambda r: (r.instance.panel, r.label, r.info_model, r.params_key))
     points = []
-    for (panel, label, info, params), rs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1], kv[0][3])):
-        ok = [r for r in rs if r["status"] in ("optimal", "inaccurate") and np.isfinite(r["cost"])]
-        costs = [r["cost"] for r in ok]
+    for (panel, label, info, params_key), rs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1], kv[0][3])):
+        ok = [r for r in rs if r.ok]
+        costs = [r.cost for r in ok]
         points.append(
             Point(
                 panel=panel,
                 label=label,
                 info_model=info,
-                params=params,
+                params=rs[0].params,
+                params_key=params_key,
                 designs=len(rs),
                 ok=len(ok),
-                links=quartiles([r["links"] for r in ok]) if ok else quartiles([r["links"] for r in rs]),
-                self_loops=quartiles([r["self_loops"] for r in rs])[1],
+                links=quartiles([r.links for r in ok]) if ok else quartiles([r.links for r in rs]),
+                self_loops=quartiles([r.self_loops for r in rs])[1],
                 cost=quartiles(costs),
                 cost_mean=float(np.mean(costs)) if costs else float("nan"),
-                statuses=dict(Counter(r["status"] for r in rs)),
+                statuses=dict(Counter(r.status for r in rs)),
             )
         )
     return points
@@ -109,7 +117,7 @@ def pareto_front(points: list[Point]) -> list[Point]:
     return front
 
 
-def budget_costs(records: list[dict], budgets=(20, 60, 140, None)) -> dict:
+def budget_costs(records, budgets=(20, 60, 140, None)) -> dict:
     """Per (panel, label): median over instances of the best cost within each link budget.
 
     For each instance, a method's best cost under budget b is the lowest cost among
@@ -117,40 +125,30 @@ def budget_costs(records: list[dict], budgets=(20, 60, 140, None)) -> dict:
     fits count as missing. Returns ``{(panel, label): [(median, instances), ...]}``.
     """
     best: dict[tuple, dict] = defaultdict(lambda: defaultdict(dict))
-    for r in records:
-        if r["status"] not in ("optimal", "inaccurate") or not np.isfinite(r["cost"]):
+    for r in as_records(records):
+        if not r.ok:
             continue
-        key = (panel_key(r["instance"]), r["label"])
-        inst = json.dumps(r["instance"], sort_keys=True)
+        key = (r.instance.panel, r.label)
         for b in budgets:
-            if b is None or r["links"] <= b:
-                current = best[key][b].get(inst, float("inf"))
-                best[key][b][inst] = min(current, r["cost"])
+            if b is None or r.links <= b:
+                current = best[key][b].get(r.instance.key, float("inf"))
+                best[key][b][r.instance.key] = min(current, r.cost)
     return {
         key: [(quartiles(list(per[b].values()))[1], len(per[b])) for b in budgets]
         for key, per in sorted(best.items())
     }
 
 
-def plant_links(records: list[dict], facts: dict | None = None) -> dict:
+def plant_links(records) -> dict:
     """Median off-diagonal plant-graph links per panel: the QI boundary.
 
     Below this many links no communication graph relaying one hop per step is
     quadratically invariant, so no convex delay-constrained (SLS) design exists
-    there. ``facts`` maps an instance's JSON to what the runner stored about it
-    (``plant_links``); instances without stored facts are rebuilt.
+    there. Link counts are the instance facts the store holds
+    (:meth:`~compare.records.InstanceRecord.with_facts` for stores without them).
     """
-    from codesign import count_links
-
-    from .runner import build_instance
-
-    facts = facts or {}
-    per_panel = defaultdict(list)
-    for inst in {json.dumps(r["instance"], sort_keys=True) for r in records}:
-        if inst not in facts:
-            facts[inst] = {"plant_links": count_links(build_instance(json.loads(inst)).plant_adj)[0]}
-        per_panel[panel_key(json.loads(inst))].append(facts[inst]["plant_links"])
-    return {panel: float(np.median(v)) for panel, v in per_panel.items()}
+    return {panel: float(np.median([inst.with_facts().plant_links for inst in rs.instances]))
+            for panel, rs in as_records(records).by_panel.items()}
 
 
 def _panel_top(points) -> float | None:
@@ -291,14 +289,13 @@ def _fmt_iqr(q: tuple, digits: int = 4) -> str:
     return f"{_fmt(q[1], digits)} [{_fmt(q[0], digits)}, {_fmt(q[2], digits)}]"
 
 
-def _params_text(params: str) -> str:
+def _params_text(params: Mapping) -> str:
     def text(value):
         # Grid values such as 0.0021544346900318843 read better at 4 digits; the
         # store and the CSV keep them exact.
         return _fmt(value) if isinstance(value, float) and np.isfinite(value) else str(value)
 
-    data = json.loads(params)
-    return ", ".join(f"{k}={text(v)}" for k, v in sorted(data.items())) or "—"
+    return ", ".join(f"{k}={text(v)}" for k, v in sorted(params.items())) or "—"
 
 
 def _summary_tables(points: list[Point]) -> list[str]:
@@ -312,7 +309,7 @@ def _summary_tables(points: list[Point]) -> list[str]:
             "|---|---|---|---:|---:|---|---:|---|",
         ]
         for p in sorted(pts, key=lambda p: (p.label, p.links[1] if np.isfinite(p.links[1]) else -1,
-                                            p.cost[1] if np.isfinite(p.cost[1]) else np.inf, p.params)):
+                                            p.cost[1] if np.isfinite(p.cost[1]) else np.inf, p.params_key)):
             lines.append(
                 f"| {p.label} | {p.info_model} | {_params_text(p.params)} | {p.designs} | {p.ok} | "
                 f"{_fmt_iqr(p.links, 3)} | {_fmt(p.self_loops, 3)} | {_fmt_iqr(p.cost)} |"
@@ -321,7 +318,7 @@ def _summary_tables(points: list[Point]) -> list[str]:
     return lines
 
 
-def _budget_tables(records: list[dict], budgets=(20, 60, 140, None)) -> list[str]:
+def _budget_tables(records: Records, budgets=(20, 60, 140, None)) -> list[str]:
     """The budget fronts at a few budgets, with the number of instances where some design fits."""
     grid = np.array([np.inf if b is None else b for b in budgets], dtype=float)
     table = {key: list(zip(_quantiles(best)[1], np.isfinite(best).sum(axis=0)))
@@ -361,14 +358,14 @@ def _paired_table(comparisons: dict, title: str) -> list[str]:
     return lines
 
 
-def _paired_lines(records: list[dict], meta: dict) -> list[str]:
+def _paired_lines(records: Records, meta: dict) -> list[str]:
     """GRNN-Sparse against every other method, and the pairs the specs ask for, per budget."""
-    labels = {r["label"] for r in records}
-    by_method = {r["method"]: r["label"] for r in records}
+    labels = records.by_label
+    by_method = {r.method: r.label for r in records}
     lines = []
     # The paper's GRNN-Sparse (tanh), not the linear ablation that shares its method name.
-    reference = next((r["label"] for r in records if r["method"] == "grnn_sparse"
-                      and r["params"].get("activation", "tanh") == "tanh"), None)
+    reference = next((r.label for r in records if r.method == "grnn_sparse"
+                      and r.params.get("activation", "tanh") == "tanh"), None)
     if reference:
         lines += _paired_table(paired_comparisons(records, reference), f"{reference} against every method")
     asked = []
@@ -391,17 +388,15 @@ def _paired_lines(records: list[dict], meta: dict) -> list[str]:
             "contains 0, the instances do not say which method is better.", ""] + lines
 
 
-def _precision_text(records: list[dict]) -> str:
+def _precision_text(records: Records) -> str:
     """The relative standard errors of the simulated costs, as measured."""
-    rel = [r["cost_stderr"] / r["cost"] for r in records if r.get("cost_kind") == "simulated"
-           and r["status"] in ("optimal", "inaccurate") and np.isfinite(r["cost"]) and r["cost"] > 0]
+    simulated = records.filter(lambda r: r.cost_kind == "simulated" and r.status in OK_STATUSES)
+    rel = [r.cost_stderr / r.cost for r in simulated if r.ok and r.cost > 0]
     if not rel:
         return ""
-    plain = [r["extras"]["plain_cost_stderr"] / r["extras"]["plain_cost"] for r in records
-             if r.get("cost_kind") == "simulated" and "plain_cost_stderr" in r.get("extras", {})
-             and r["status"] in ("optimal", "inaccurate") and r["extras"]["plain_cost"] > 0]
-    cv = sum(str(r["extras"].get("cost_estimator", "")).startswith("control variates") for r in records
-             if r.get("cost_kind") == "simulated" and r["status"] in ("optimal", "inaccurate"))
+    plain = [r.extras["plain_cost_stderr"] / r.extras["plain_cost"] for r in simulated
+             if "plain_cost_stderr" in r.extras and r.extras["plain_cost"] > 0]
+    cv = sum(str(r.extras.get("cost_estimator", "")).startswith("control variates") for r in simulated)
     how = "control variates" if cv == len(rel) else f"control variates for {cv} of {len(rel)}, else the sample mean"
     text = (f" ({how}; relative standard error: median {np.median(rel):.3%}, largest {max(rel):.3%} over "
             f"{len(rel)} simulated designs")
@@ -410,7 +405,7 @@ def _precision_text(records: list[dict]) -> str:
     return text + ")"
 
 
-def _sls_bounds(records: list[dict]) -> dict:
+def _sls_bounds(records: Records) -> dict:
     """Panel -> (median, instances) of SLS on the complete graph at one hop per step, act_delay 1.
 
     No controller with the delayed information model beats it on its instance
@@ -418,18 +413,18 @@ def _sls_bounds(records: list[dict]) -> dict:
     """
     per_panel = defaultdict(list)
     for r in records:
-        p = r["params"]
-        if (r["method"] in ("sls", "sls_topologies") and p.get("graph") == "complete" and p.get("act_delay") == 1
-                and p.get("speed") == 1.0 and p.get("fir") is None and r["status"] in ("optimal", "inaccurate")):
-            per_panel[panel_key(r["instance"])].append(r["cost"])
+        p = r.params
+        if (r.method in ("sls", "sls_topologies") and p.get("graph") == "complete" and p.get("act_delay") == 1
+                and p.get("speed") == 1.0 and p.get("fir") is None and r.status in OK_STATUSES):
+            per_panel[r.instance.panel].append(r.cost)
     return {panel: (float(np.median(v)), len(v)) for panel, v in per_panel.items()}
 
 
-def _delayed_section(records: list[dict], out: Path, files: dict, styles: dict, boundaries: dict) -> list[str]:
+def _delayed_section(records, out: Path, files: dict, styles: dict, boundaries: dict) -> list[str]:
     """Budget fronts of the methods with the delayed information model, the SLS bound, and which wins."""
-
-    delayed = [r for r in records if r["info_model"] == "delayed"]
-    if len({r["label"] for r in delayed}) < 2:
+    records = as_records(records)
+    delayed = records.filter(lambda r: r.info_model == "delayed")
+    if len(delayed.by_label) < 2:
         return []
     bounds = _sls_bounds(records)
     fronts = budget_fronts(delayed)
@@ -507,11 +502,11 @@ def _pareto_tables(points: list[Point]) -> list[str]:
     return lines
 
 
-def _fingerprint_lines(records: list[dict], meta: dict) -> list[str]:
+def _fingerprint_lines(records: Records, meta: dict) -> list[str]:
     """Which code produced the runs: one row per (method, fingerprint)."""
     runs = defaultdict(set)
     for r in records:
-        runs[(r["method"], r.get("fingerprint") or "—")].add(r["run_key"])
+        runs[(r.method, r.fingerprint or "—")].add(r.run_key)
     lines = ["## Code fingerprints", "",
              "A run is reused from the store only while its fingerprint matches the code: the source of the "
              "method's module and the project modules it uses, the evaluation code, and the versions of numpy, "
@@ -524,20 +519,20 @@ def _fingerprint_lines(records: list[dict], meta: dict) -> list[str]:
     return lines + [""]
 
 
-def _write_csv(records: list[dict], path: Path) -> None:
-    instance_keys = sorted({k for r in records for k in r["instance"]})
+def _write_csv(records: Records, path: Path) -> None:
+    instance_keys = sorted({k for inst in records.instances for k in inst.spec})
     columns = ["label", "method", "params", "status", "cost", "cost_stderr", "cost_kind", "links", "self_loops",
                "info_model", "seconds", "message", "extras", "run_key", "idx", "fingerprint"]
     with path.open("w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow([f"instance_{k}" for k in instance_keys] + columns)
         for r in records:
-            scalars = {k: v for k, v in r["extras"].items() if isinstance(v, (int, float, str, bool))}
-            row = [r["instance"].get(k, "") for k in instance_keys]
+            scalars = {k: v for k, v in r.extras.items() if isinstance(v, (int, float, str, bool))}
+            row = [r.instance.spec.get(k, "") for k in instance_keys]
             for col in columns:
-                value = r.get(col, "")
+                value = getattr(r, col)
                 if col == "params":
-                    value = json.dumps(value, sort_keys=True)
+                    value = r.params_key
                 elif col == "extras":
                     value = json.dumps(scalars, sort_keys=True)
                 elif isinstance(value, float):
@@ -555,13 +550,13 @@ def _save_figure(fig, out: Path, stem: str, files: dict) -> None:
     plt.close(fig)
 
 
-def _experiments_with(section: str, records: list[dict], meta: dict, members: dict) -> tuple[list[str], list[dict]]:
+def _experiments_with(section: str, records: Records, meta: dict, members: dict) -> tuple[list[str], Records]:
     """The experiments that ask for ``section`` and the records of their runs."""
     names = sorted(k.split(":", 1)[1] for k, v in meta.items() if k.startswith("sections:") and section in v)
     keys = set().union(*(members.get(n, set()) for n in names)) if names else set()
     # A store written before experiments recorded their members: a run belongs to the one that computed it.
     unlisted = {n for n in names if not members.get(n)}
-    return names, [r for r in records if r["run_key"] in keys or r.get("experiment") in unlisted]
+    return names, records.filter(lambda r: r.run_key in keys or r.experiment in unlisted)
 
 
 def _producing(product: str, meta: dict) -> dict:
@@ -569,7 +564,7 @@ def _producing(product: str, meta: dict) -> dict:
     return {k.split(":", 1)[1]: v for k, v in meta.items() if k.startswith("method:") and product in v.get("produces", [])}
 
 
-def _learning_sections(records: list[dict], out: Path, files: dict, load_controller, meta: dict,
+def _learning_sections(records: Records, out: Path, files: dict, load_controller, meta: dict,
                        members: dict) -> list[str]:
     """Sections the data asks for: Table 1 and training curves of the experiments that declare them,
     and the designed-topology path of a method that declares one."""
@@ -582,7 +577,8 @@ def _learning_sections(records: list[dict], out: Path, files: dict, load_control
     if table1:
         lines += ["## Table 1 (paper §IV-A)", "", f"From experiment {', '.join(names)}.", "", table1_markdown(table1), ""]
     names, curved = _experiments_with("training_curves", records, meta, members)
-    curved = [r for r in curved if r["method"] in _producing("training_curve", meta) and "curve" in r["extras"]]
+    producing = _producing("training_curve", meta)
+    curved = curved.filter(lambda r: r.method in producing and "curve" in r.extras)
     if curved:
         fig, _ = training_curves_figure(curved)
         _save_figure(fig, out, "training_curves", files)
@@ -593,35 +589,39 @@ def _learning_sections(records: list[dict], out: Path, files: dict, load_control
     for name, declared in sorted(_producing("topology_path", meta).items()):
         path = path or topology_path_records(records, method=name, weight=declared["path_param"])
     if len(path) >= 2 and load_controller is not None:
-        spec = {k: v for k, v in path[0]["instance"].items() if k != "family"}
-        weight = next(v["path_param"] for k, v in _producing("topology_path", meta).items() if k == path[0]["method"])
+        instance = path[0].instance
+        spec = {k: v for k, v in instance.spec.items() if k != "family"}
+        weight = next(v["path_param"] for k, v in _producing("topology_path", meta).items() if k == path[0].method)
         entries = []
         for r in path:
-            controller = load_controller(r["run_key"], r["idx"])
+            controller = load_controller(r.run_key, r.idx)
             support = getattr(controller, "support", None)
             if support is not None:
-                entries.append((r["params"][weight], r["links"], r["cost"], support))
+                entries.append((r.params[weight], r.links, r.cost, support))
         if len(entries) >= 2:
-            fig, _ = plot_topology_path(build_instance(path[0]["instance"]), entries)
+            # The figure draws the instance's matrices, which the store does not keep.
+            fig, _ = plot_topology_path(build_instance(dict(instance.spec)), entries)
             _save_figure(fig, out, "topologies", files)
             inst = ", ".join(f"{k} = {v}" for k, v in spec.items())
             symbol = "β" if weight == "beta" else weight
             lines += [f"## Designed topologies along the {symbol} path (paper Fig. 4)", "",
-                      f"{path[0]['label']} on one instance ({inst}); nodes coloured by the magnitude of the leading "
+                      f"{path[0].label} on one instance ({inst}); nodes coloured by the magnitude of the leading "
                       f"eigenvector of A. Under each graph: the weight {symbol}, the directed off-diagonal links "
                       "|E| and the normalized cost J.", "", "![designed topologies](topologies.png)", ""]
     return lines
 
 
-def write_report(records: list[dict], out, *, specs: dict | None = None, title: str = "Comparison report",
+def write_report(records, out, *, specs: dict | None = None, title: str = "Comparison report",
                  commands: list[str] | None = None, load_controller=None, meta: dict | None = None,
                  members: dict | None = None, superseded: int = 0) -> dict[str, Path]:
     """Write ``cost_vs_links.png/.svg``, ``runs.csv`` and ``report.md`` into ``out``.
 
     Parameters
     ----------
-    records : list of dict
-        :meth:`compare.store.Store.records`.
+    records : Records or list of dict
+        :meth:`compare.store.Store.records` (dicts shaped like the store's rows are
+        converted; their instances' facts are then rebuilt, see
+        :meth:`compare.records.InstanceRecord.with_facts`).
     out : str or Path
         Output folder (created).
     specs : dict, optional
@@ -635,8 +635,8 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         designed-topology figure.
     meta : dict, optional
         :meth:`Store.meta`: the sections each experiment asks for, what each method
-        declares it produces, code fingerprints and stored instance facts. Sections
-        come from these declarations only.
+        declares it produces and code fingerprints. Sections come from these
+        declarations only.
     members : dict, optional
         :meth:`Store.members`: experiment name -> its run keys.
     superseded : int
@@ -649,14 +649,13 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    records = sorted(records, key=lambda r: (json.dumps(r["instance"], sort_keys=True), r["label"], r["run_key"], r["idx"]))
+    records = Records(sorted(as_records(records), key=lambda r: (r.instance.key, r.label, r.run_key, r.idx)))
     meta, members = dict(meta or {}), dict(members or {})
     points = aggregate(records)
-    facts = {k.split(":", 1)[1]: v for k, v in meta.items() if k.startswith("instance:")}
-    boundaries = plant_links(records, facts)
+    boundaries = plant_links(records)
     files = {}
 
-    styles = label_styles(sorted({r["label"] for r in records}))
+    styles = label_styles(sorted(records.by_label))
     fronts = budget_fronts(records)
     if fronts:
         fig, _ = plot_budget_fronts(fronts, styles=styles, boundaries=boundaries)
@@ -666,9 +665,8 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     files["csv"] = out / "runs.csv"
     _write_csv(records, files["csv"])
 
-    instances = {json.dumps(r["instance"], sort_keys=True) for r in records}
-    runs = {r["run_key"] for r in records}
-    statuses = Counter(r["status"] for r in records)
+    runs = {r.run_key for r in records}
+    statuses = Counter(r.status for r in records)
     lines = [f"# {title}", ""]
     if commands:
         *run_commands, rebuild = commands
@@ -678,7 +676,7 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
         lines += [how, ""]
     lines += _environment_lines(meta)
     lines += [
-        f"{len(runs)} runs on {len(instances)} instances, {len(records)} designs. "
+        f"{len(runs)} runs on {len(records.instances)} instances, {len(records)} designs. "
         "Costs are E[J] / trace(P) over the horizon (centralized LQR = 1); links are directed off-diagonal "
         "communication links (self-loops are local feedback and listed separately). "
         "Exact closed-form costs for linear controllers; for learned ones an estimate on the validation set, "
@@ -733,12 +731,12 @@ def write_report(records: list[dict], out, *, specs: dict | None = None, title: 
     lines += _fingerprint_lines(records, meta)
     lines += ["## Runs by status", "", "| status | designs |", "|---|---:|"]
     lines += [f"| {status} | {count} |" for status, count in sorted(statuses.items())]
-    failures = [r for r in records if r["status"] != "optimal"]
+    failures = records.filter(lambda r: r.status != "optimal")
     if failures:
         lines += ["", "Non-optimal designs (first 20):", "", "| instance | method | status | message |", "|---|---|---|---|"]
         for r in failures[:20]:
-            inst = ", ".join(f"{k}={v}" for k, v in r["instance"].items() if k != "family")
-            lines.append(f"| {inst} | {r['label']} | {r['status']} | {r['message'][:160]} |")
+            inst = ", ".join(f"{k}={v}" for k, v in r.instance.spec.items() if k != "family")
+            lines.append(f"| {inst} | {r.label} | {r.status} | {r.message[:160]} |")
     lines += ["", "## Files", ""]
     lines += [f"- `{p.name}`" for key, p in sorted(files.items()) if key.endswith(".png") or key.endswith(".svg")]
     lines += ["- `runs.csv`: every design of every run", "- `report.html`: this page, self-contained", ""]

@@ -13,28 +13,20 @@ statistics of the differences, ranks from the binomial distribution).
 
 from __future__ import annotations
 
-import json
-from collections import Counter, defaultdict
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
 
+from .records import OK_STATUSES, as_records, panel_key
+
 __all__ = ["Front", "budget_fronts", "best_within", "best_tables", "Paired", "paired_difference", "median_interval",
            "paired_comparisons", "instances_by_panel", "panel_key", "panel_title", "OK_STATUSES"]
 
-OK_STATUSES = ("optimal", "inaccurate")
 # Quantiles of values that may be infinite: replace inf by a huge sentinel, so that a
 # median between a finite and an infinite value reads as "not reached" (inf).
 _SENTINEL = 1e300
-
-
-def panel_key(instance: dict) -> tuple:
-    """The panel an instance belongs to: (family, n, a_norm), a_norm None for families without one.
-
-    (None, not NaN: NaN keys never compare equal, so panels keyed by NaN cannot be looked up.)
-    """
-    return (instance.get("family", "?"), instance.get("n", 0), instance.get("a_norm"))
 
 
 def panel_title(key: tuple) -> str:
@@ -42,19 +34,9 @@ def panel_title(key: tuple) -> str:
     return f"N = {n}, ‖A‖₂ = {a_norm:g}" if a_norm is not None else f"{family}, N = {n}"
 
 
-_panel = panel_key
-
-
-def _ok(record) -> bool:
-    return record["status"] in OK_STATUSES and np.isfinite(record["cost"])
-
-
 def instances_by_panel(records) -> dict[tuple, list[str]]:
-    """Panel -> the sorted JSON of every instance with a record in it."""
-    out = defaultdict(set)
-    for r in records:
-        out[_panel(r["instance"])].add(json.dumps(r["instance"], sort_keys=True))
-    return {panel: sorted(v) for panel, v in out.items()}
+    """Panel -> the sorted :attr:`~compare.records.InstanceRecord.key` of every instance with a record in it."""
+    return {panel: sorted(rs.by_instance) for panel, rs in as_records(records).by_panel.items()}
 
 
 def _quantiles(values) -> np.ndarray:
@@ -94,35 +76,31 @@ def best_within(records, panel_instances: list[str], budgets) -> np.ndarray:
     index = {inst: i for i, inst in enumerate(panel_instances)}
     budgets = np.asarray(budgets, dtype=float)
     best = np.full((len(panel_instances), budgets.size), np.inf)
-    for r in records:
-        if _ok(r):
-            i = index[json.dumps(r["instance"], sort_keys=True)]
-            fits = budgets >= r["links"]
-            best[i, fits] = np.minimum(best[i, fits], r["cost"])
+    for r in as_records(records):
+        if r.ok:
+            i = index[r.instance.key]
+            fits = budgets >= r.links
+            best[i, fits] = np.minimum(best[i, fits], r.cost)
     return best
 
 
 def best_tables(records, budgets) -> dict[tuple, np.ndarray]:
     """(panel, label) -> :func:`best_within` of that label's records; rows are the panel's instances, aligned
     across labels (:func:`instances_by_panel` order)."""
+    records = as_records(records)
     panels = instances_by_panel(records)
-    groups = defaultdict(list)
-    for r in records:
-        groups[(_panel(r["instance"]), r["label"])].append(r)
-    return {key: best_within(rs, panels[key[0]], budgets) for key, rs in sorted(groups.items())}
+    return {key: best_within(rs, panels[key[0]], budgets) for key, rs in sorted(records.by_panel_label.items())}
 
 
 def budget_fronts(records) -> list[Front]:
     """One :class:`Front` per (panel, label), evaluated at every link count any design of it has."""
+    records = as_records(records)
     panels = instances_by_panel(records)
-    groups = defaultdict(list)
-    for r in records:
-        groups[(_panel(r["instance"]), r["label"])].append(r)
     fronts = []
-    for (panel, label), rs in sorted(groups.items()):
-        budgets = np.unique([0.0] + [float(r["links"]) for r in rs if _ok(r)])
+    for (panel, label), rs in sorted(records.by_panel_label.items()):
+        budgets = np.unique([0.0] + [float(r.links) for r in rs if r.ok])
         best = best_within(rs, panels[panel], budgets)
-        info = Counter(r["info_model"] for r in rs).most_common(1)[0][0]
+        info = Counter(r.info_model for r in rs).most_common(1)[0][0]
         fronts.append(Front(panel, label, info, budgets, _quantiles(best), len(panels[panel])))
     return fronts
 

@@ -26,6 +26,8 @@ import numpy as np
 
 from codesign.controllers import controller_from_arrays
 
+from .records import Records
+
 __all__ = ["Store", "StoreError"]
 
 _SCHEMA = """
@@ -74,6 +76,9 @@ CREATE TABLE IF NOT EXISTS members (
     PRIMARY KEY (experiment, run_key)
 );
 """
+
+#: Meta entries ``instance:<instance key>`` hold the facts the runner stored about an instance.
+_FACTS = "instance:"
 
 #: A claim from another host with no heartbeat for this long is taken over.
 STALE_SECONDS = 6 * 3600.0
@@ -250,11 +255,15 @@ class Store:
             "SELECT COUNT(*) FROM runs WHERE EXISTS (SELECT 1 FROM members) "
             "AND run_key NOT IN (SELECT run_key FROM members)").fetchone()[0]
 
-    def records(self) -> list[dict]:
-        """Every current design as a flat dict (JSON fields decoded, no controller).
+    def records(self) -> Records:
+        """Every current design as typed, read-only records (no controller): see :mod:`compare.records`.
 
         Current means named by an experiment's latest ``compare run`` (see
-        :meth:`set_members`); a store without membership records gives every design.
+        :meth:`set_members`); a store without membership records gives every
+        design. Each design's :class:`~compare.records.InstanceRecord` carries the
+        instance facts the runner stored; a store written before instance facts
+        were recorded leaves them None (:meth:`~compare.records.InstanceRecord.with_facts`
+        rebuilds them).
         """
         query = """
             SELECT d.run_key, d.idx, r.experiment, r.instance, d.method, d.label, d.params, d.cost,
@@ -269,15 +278,14 @@ class Store:
             "cost_kind", "links", "self_loops", "info_model", "status", "message", "seconds",
             "controller_kind", "extras", "fingerprint",
         ]
-        out = []
+        rows = []
         for row in self._conn.execute(query):
             record = dict(zip(cols, row))
             for key in ("instance", "params", "extras"):
                 record[key] = json.loads(record[key]) if record[key] else {}
-            for key in ("cost", "cost_stderr"):
-                record[key] = float("nan") if record[key] is None else record[key]
-            out.append(record)
-        return out
+            rows.append(record)
+        facts = {k[len(_FACTS):]: v for k, v in self.meta().items() if k.startswith(_FACTS)}
+        return Records.from_rows(rows, facts)
 
     def controller(self, run_key: str, idx: int = 0):
         """Rebuild a stored controller (None if the design had none)."""
@@ -302,6 +310,4 @@ class Store:
         pandas, from the optional extra: ``pip install -e ".[analysis]"``;
         without it, raises :class:`compare.export.MissingExtra` (an ImportError).
         """
-        from .export import designs_frame
-
-        return designs_frame(self.records(), self.members())
+        return self.records().to_pandas(self.members())

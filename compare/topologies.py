@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import json
-
 import matplotlib.pyplot as plt
 import networkx as nx
 import numpy as np
+
+from .records import DesignRecord, as_records
 
 __all__ = ["plot_topology_path", "topology_path_records"]
 
@@ -66,8 +66,8 @@ def plot_topology_path(instance, path, *, axes=None):
     return fig, axes
 
 
-def topology_path_records(records: list[dict], *, method: str = "grnn_sparse", weight: str = "beta",
-                          prefer_a_norm: float = 1.1) -> list[dict]:
+def topology_path_records(records, *, method: str = "grnn_sparse", weight: str = "beta",
+                          prefer_a_norm: float = 1.1) -> list[DesignRecord]:
     """The records of one instance's regularization path, for :func:`plot_topology_path`.
 
     A path is one instance and one setting of every other hyperparameter (a
@@ -77,20 +77,19 @@ def topology_path_records(records: list[dict], *, method: str = "grnn_sparse", w
     tanh GRNN over the linear ablation; then the most weights, then the lowest seed.
     """
     paths: dict[tuple, dict] = {}
-    for r in records:
-        if r["method"] != method or r["status"] != "optimal" or weight not in r["params"]:
+    for r in as_records(records):
+        if r.method != method or r.status != "optimal" or weight not in r.params:
             continue
-        others = {k: v for k, v in r["params"].items() if k != weight}
-        key = (json.dumps(r["instance"], sort_keys=True), json.dumps(others, sort_keys=True))
-        paths.setdefault(key, {})[r["params"][weight]] = r
+        paths.setdefault((r.instance.key, r.params_key_without(weight)), {})[r.params[weight]] = r
     if not paths:
         return []
 
     def rank(item):
-        inst = json.loads(item[0][0])
-        preferred = inst.get("a_norm") == prefer_a_norm and len(item[1]) >= 2
-        linear = json.loads(item[0][1]).get("activation") == "identity"
-        return (not preferred, linear, -len(item[1]), inst.get("seed", 0), item[0][1])
+        (_, others), path = item
+        design = next(iter(path.values()))
+        preferred = design.instance.a_norm == prefer_a_norm and len(path) >= 2
+        linear = design.params.get("activation") == "identity"
+        return (not preferred, linear, -len(path), design.instance.spec.get("seed", 0), others)
 
     _, path = min(paths.items(), key=rank)
     return [path[w] for w in sorted(path)]

@@ -85,7 +85,7 @@ def test_to_pandas_has_a_row_per_current_design_with_settings_as_columns(store_p
     # Runs shared by two experiments say so.
     assert set(lqr["experiments"]) == {"other,tiny"} and set(grnn["experiments"]) == {"tiny"}
     # The same numbers as the store's records, in the same order.
-    assert list(df["cost"].fillna(-1)) == [r["cost"] if r["cost"] == r["cost"] else -1 for r in current]
+    assert list(df["cost"].fillna(-1)) == [r.cost if r.cost == r.cost else -1 for r in current]
 
 
 def test_designs_frame_types_do_not_depend_on_the_methods_present():

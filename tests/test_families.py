@@ -57,10 +57,10 @@ def test_systems_from_files_run_end_to_end_and_edits_rerun_only_that_file(tmp_pa
     assert "8 runs: 8 computed" in first.output
     with Store(out / "results.sqlite") as store:
         records = store.records()
-    lqr = [r for r in records if r["method"] == "lqr"]
-    assert sorted(r["instance"]["name"] for r in lqr) == ["sys0", "sys1"]
+    lqr = [r for r in records if r.method == "lqr"]
+    assert sorted(r.instance.spec["name"] for r in lqr) == ["sys0", "sys1"]
     for r in lqr:
-        assert abs(r["cost"] - 1.0) < 1e-9 and r["links"] == 30
+        assert abs(r.cost - 1.0) < 1e-9 and r.links == 30
     assert "matrices, N = 6" in (out / "report.md").read_text()
 
     # Editing one file recomputes its runs only.

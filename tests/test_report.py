@@ -97,8 +97,8 @@ def test_topology_path_prefers_the_papers_a_norm_then_the_longest_path_and_draws
             rec["method"] = "grnn_sparse"
             records.append(rec)
     path = topology_path_records(records)
-    assert [r["params"]["beta"] for r in path] == [0.1, 1.0, 10.0]
-    assert all(r["instance"]["seed"] == 1 for r in path)
+    assert [r.params["beta"] for r in path] == [0.1, 1.0, 10.0]
+    assert all(r.instance.seed == 1 for r in path)
     # A longer path elsewhere, and a run with other settings on the preferred
     # instance, do not displace or join the preferred a_norm's path.
     for beta in (0.01, 0.1, 1.0, 10.0):
@@ -108,8 +108,8 @@ def test_topology_path_prefers_the_papers_a_norm_then_the_longest_path_and_draws
     other = _rec(dict(INST[0], seed=1, a_norm=1.1), "GRNN-Sparse", 10, 1.2, params={"beta": 2.0, "steps": 750})
     other["method"] = "grnn_sparse"
     path = topology_path_records(records + [other])
-    assert [r["params"]["beta"] for r in path] == [0.1, 1.0, 10.0]
-    assert all(r["instance"]["seed"] == 1 and r["instance"]["a_norm"] == 1.1 for r in path)
+    assert [r.params["beta"] for r in path] == [0.1, 1.0, 10.0]
+    assert all(r.instance.seed == 1 and r.instance.a_norm == 1.1 for r in path)
     # The linear ablation's path, even a longer one on the same instance, gives way to the paper's tanh GRNN.
     linear = []
     for beta in (0.01, 0.1, 1.0, 10.0, 100.0):
@@ -118,8 +118,8 @@ def test_topology_path_prefers_the_papers_a_norm_then_the_longest_path_and_draws
         rec["method"] = "grnn_sparse"
         linear.append(rec)
     path = topology_path_records(records + linear)
-    assert [r["params"]["beta"] for r in path] == [0.1, 1.0, 10.0]
-    assert all("activation" not in r["params"] for r in path)
+    assert [r.params["beta"] for r in path] == [0.1, 1.0, 10.0]
+    assert all("activation" not in r.params for r in path)
     inst = paper_instance(1, n=8, degree=4, a_norm=1.1, horizon=10)
     supports = [np.eye(8) + np.diag(np.ones(7), 1) * (k > 0) for k in range(3)]
     fig, axes = plot_topology_path(inst, [(b, 7 * (k > 0), 1.2, s) for k, (b, s) in enumerate(zip((0.1, 1, 10), supports))])
@@ -149,9 +149,10 @@ def test_report_counts_runs_and_shows_how_to_regenerate(tmp_path):
 def test_params_column_rounds_grid_values_and_keeps_the_rest():
     from compare.report import _params_text
 
-    text = _params_text('{"gamma": 0.0021544346900318843, "reweight": 3, "rho": 100.0, "end": Infinity, "g": "plant"}')
+    text = _params_text({"gamma": 0.0021544346900318843, "reweight": 3, "rho": 100.0, "end": float("inf"),
+                         "g": "plant"})
     assert text == "end=inf, g=plant, gamma=0.002154, reweight=3, rho=100"
-    assert _params_text("{}") == "—"
+    assert _params_text({}) == "—"
 
 
 def test_sections_come_from_declarations_not_names(tmp_path):

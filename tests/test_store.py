@@ -32,10 +32,10 @@ def test_run_store_and_resume(tmp_path):
         assert (again.computed, again.already_stored) == (0, 9)
         records = store.records()
         assert len(records) == 9
-        lqr = [r for r in records if r["method"] == "lqr"]
-        assert all(r["cost"] == pytest.approx(1.0, abs=1e-9) for r in lqr)
+        lqr = [r for r in records if r.method == "lqr"]
+        assert all(r.cost == pytest.approx(1.0, abs=1e-9) for r in lqr)
         # controllers come back as arrays, not pickles
-        controller = store.controller(lqr[0]["run_key"])
+        controller = store.controller(lqr[0].run_key)
         assert controller.K.shape == (8, 8)
         assert "spec:s" in store.meta()
 
@@ -46,7 +46,7 @@ def test_a_new_label_renames_stored_runs_without_recomputing(tmp_path):
         renamed = parse_spec(SPEC.replace('method = "lqr"', 'method = "lqr"\nlabel = "Central"'))
         summary = run_experiment(renamed, store, progress=False)
         assert summary.computed == 0
-        assert {r["label"] for r in store.records() if r["method"] == "lqr"} == {"Central"}
+        assert {r.label for r in store.records() if r.method == "lqr"} == {"Central"}
 
 
 def test_add_run_is_atomic_and_idempotent(tmp_path):
@@ -64,7 +64,7 @@ def test_failed_designs_store_nan_not_numbers(tmp_path):
     with Store(tmp_path / "r.sqlite") as store:
         store.add_run(spec.runs()[1], [Design.failure("lqr", {}, "infeasible", "no")], experiment="s", seconds=0)
         (record,) = store.records()
-        assert record["status"] == "infeasible" and np.isnan(record["cost"])
+        assert record.status == "infeasible" and np.isnan(record.cost)
 
 
 def test_not_a_store(tmp_path):
@@ -79,7 +79,7 @@ def test_noise_scenario_is_recorded(tmp_path):
     with Store(tmp_path / "r.sqlite") as store:
         run_experiment(spec, store, progress=False)
         for r in store.records():
-            assert r["extras"]["noise_cost"] > r["cost"]
+            assert r.extras["noise_cost"] > r.cost
 
 
 def test_method_exception_becomes_failed_design(tmp_path, monkeypatch):
@@ -92,7 +92,7 @@ def test_method_exception_becomes_failed_design(tmp_path, monkeypatch):
     with Store(tmp_path / "r.sqlite") as store:
         summary = run_experiment(parse_spec(SPEC), store, progress=False)
         assert summary.statuses["failed"] == 9
-        assert all("solver exploded" in r["message"] for r in store.records())
+        assert all("solver exploded" in r.message for r in store.records())
 
 
 def test_batched_methods_get_grouped_runs_and_store_per_run(tmp_path, monkeypatch):
@@ -111,9 +111,9 @@ def test_batched_methods_get_grouped_runs_and_store_per_run(tmp_path, monkeypatc
                       .replace("seeds = 3", "seeds = 6"))
     with Store(tmp_path / "b.sqlite") as store:
         run_experiment(spec, store, progress=False)
-        batched = sorted(r["cost"] for r in store.records() if r["method"] == "decentralized_batched")
+        batched = sorted(r.cost for r in store.records() if r.method == "decentralized_batched")
     assert sorted(calls) == [2, 4]
     with Store(tmp_path / "p.sqlite") as store:
         run_experiment(parse_spec(SPEC.replace("seeds = 3", "seeds = 6")), store, progress=False)
-        plain = sorted(r["cost"] for r in store.records() if r["method"] == "decentralized")
+        plain = sorted(r.cost for r in store.records() if r.method == "decentralized")
     assert batched == plain and len(plain) == 6

@@ -1,0 +1,272 @@
+"""Typed, read-only records of a result store: what the report and the export read.
+
+:meth:`compare.store.Store.records` gives :class:`Records`, one :class:`DesignRecord`
+per current design; the designs on one instance share its :class:`InstanceRecord`.
+Canonical keys (the sorted JSON of an instance's spec or of a design's
+hyperparameters, as the store writes them) are computed once here, so that the
+report groups by them without serializing anything again.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, fields, replace
+from functools import cached_property, lru_cache
+from types import MappingProxyType
+from typing import Any
+
+__all__ = ["InstanceRecord", "DesignRecord", "Records", "as_records", "canonical_key", "panel_key", "OK_STATUSES"]
+
+#: Statuses of a design whose cost counts.
+OK_STATUSES = ("optimal", "inaccurate")
+
+
+def canonical_key(mapping: Mapping) -> str:
+    """The sorted JSON of ``mapping``, as the store writes specs: equal contents give equal keys."""
+    return json.dumps(dict(mapping), sort_keys=True)
+
+
+def panel_key(spec: Mapping) -> tuple:
+    """The panel an instance belongs to: (family, n, a_norm), a_norm None for families without one.
+
+    (None, not NaN: NaN keys never compare equal, so panels keyed by NaN cannot be looked up.)
+    """
+    return (spec.get("family", "?"), spec.get("n", 0), spec.get("a_norm"))
+
+
+def _frozen(mapping: Mapping | None) -> Mapping:
+    return MappingProxyType(dict(mapping or {}))
+
+
+@lru_cache(maxsize=None)
+def _rebuilt_facts(key: str) -> dict:
+    from .runner import build_instance, instance_facts
+
+    return instance_facts(build_instance(json.loads(key)))
+
+
+@dataclass(frozen=True)
+class InstanceRecord:
+    """One problem instance: its spec, canonical key and the facts the runner stored about it.
+
+    Equality and hashing use ``key`` alone, so an InstanceRecord can key a dict.
+
+    Parameters
+    ----------
+    spec : Mapping
+        The spec fields (``family``, ``n``, ``a_norm``, ``seed``, ...), read-only.
+    key : str
+        :func:`canonical_key` of ``spec``.
+    n, plant_links, comm_links : int or None
+        Nodes, and directed off-diagonal links of the plant and of the
+        communication graph (:func:`compare.runner.instance_facts`); None where
+        the store holds no facts for the instance (see :meth:`with_facts`).
+    """
+
+    spec: Mapping[str, Any] = field(compare=False)
+    key: str = field(repr=False)
+    n: int | None = field(default=None, compare=False)
+    plant_links: int | None = field(default=None, compare=False)
+    comm_links: int | None = field(default=None, compare=False)
+
+    @classmethod
+    def from_spec(cls, spec: Mapping, facts: Mapping | None = None) -> InstanceRecord:
+        """The record of ``spec``, with ``facts`` as the runner stores them (``n``, ``plant_links``, ``comm_links``)."""
+        facts = facts or {}
+        return cls(_frozen(spec), canonical_key(spec), facts.get("n"), facts.get("plant_links"),
+                   facts.get("comm_links"))
+
+    @property
+    def family(self) -> str:
+        return self.spec.get("family", "?")
+
+    @property
+    def seed(self) -> int | None:
+        return self.spec.get("seed")
+
+    @property
+    def a_norm(self) -> float | None:
+        return self.spec.get("a_norm")
+
+    @property
+    def panel(self) -> tuple:
+        """:func:`panel_key` of the spec."""
+        return panel_key(self.spec)
+
+    @property
+    def has_facts(self) -> bool:
+        return None not in (self.n, self.plant_links, self.comm_links)
+
+    def with_facts(self) -> InstanceRecord:
+        """This instance with its facts, rebuilding the instance if the store has none.
+
+        The one fallback for stores written before the runner recorded instance
+        facts (and for records made by hand): the instance is built from its spec,
+        once per spec and process, which takes seconds for large instances.
+        """
+        if self.has_facts:
+            return self
+        return replace(self, **_rebuilt_facts(self.key))
+
+
+@dataclass(frozen=True)
+class DesignRecord:
+    """One stored design: the columns of the store's design and run rows, decoded and read-only.
+
+    ``params`` and ``extras`` are read-only mappings (values nested in them, such as
+    training curves, are not copied); ``params_key`` is the canonical JSON of
+    ``params``. ``cost`` and ``cost_stderr`` are NaN where the store has none.
+    """
+
+    run_key: str
+    idx: int
+    experiment: str | None
+    instance: InstanceRecord
+    method: str
+    label: str
+    params: Mapping[str, Any] = field(hash=False)
+    params_key: str = field(repr=False)
+    cost: float
+    cost_stderr: float
+    cost_kind: str | None
+    links: int | None
+    self_loops: int | None
+    info_model: str | None
+    status: str | None
+    message: str | None
+    seconds: float | None
+    controller_kind: str | None
+    extras: Mapping[str, Any] = field(hash=False, repr=False)
+    fingerprint: str | None
+
+    @classmethod
+    def from_dict(cls, row: Mapping, instance: InstanceRecord | None = None) -> DesignRecord:
+        """A record from a dict of the store's columns (JSON fields decoded); missing columns are None.
+
+        ``instance`` replaces the one built from ``row["instance"]`` (to share it, or to attach facts).
+        """
+        params = row.get("params") or {}
+        values = {f.name: row.get(f.name) for f in fields(cls)}
+        values.update(
+            instance=instance or InstanceRecord.from_spec(row.get("instance") or {}),
+            params=_frozen(params), params_key=canonical_key(params), extras=_frozen(row.get("extras")),
+            **{k: math.nan if values[k] is None else values[k] for k in ("cost", "cost_stderr")},
+        )
+        return cls(**values)
+
+    @property
+    def ok(self) -> bool:
+        """The design's cost counts: an accepted status and a finite cost."""
+        return self.status in OK_STATUSES and math.isfinite(self.cost)
+
+    def params_key_without(self, name: str) -> str:
+        """:attr:`params_key` of every hyperparameter but ``name``: one regularization path's key."""
+        return canonical_key({k: v for k, v in self.params.items() if k != name})
+
+
+class Records(Sequence):
+    """An immutable sequence of :class:`DesignRecord`, with its groupings computed once.
+
+    Slicing, :meth:`filter` and the groupings give new ``Records``, in the order
+    of this one; groupings are dicts in order of first appearance.
+
+    Parameters
+    ----------
+    designs : iterable of DesignRecord
+    """
+
+    def __init__(self, designs: Iterable[DesignRecord] = ()):
+        self._designs = tuple(designs)
+
+    @classmethod
+    def from_rows(cls, rows: Iterable, facts: Mapping[str, Mapping] | None = None) -> Records:
+        """Records from dicts shaped like the store's rows, or DesignRecords (kept as they are).
+
+        Parameters
+        ----------
+        rows : iterable of dict or DesignRecord
+            Dicts with the store's columns, JSON fields decoded; missing columns are None.
+        facts : dict, optional
+            Instance key -> the facts the runner stored (:meth:`InstanceRecord.from_spec`).
+
+        Returns
+        -------
+        Records
+            The dicts' designs on one instance share one :class:`InstanceRecord`.
+        """
+        facts = facts or {}
+        instances: dict[str, InstanceRecord] = {}
+
+        def design(row) -> DesignRecord:
+            if isinstance(row, DesignRecord):
+                return row
+            spec = row.get("instance") or {}
+            key = canonical_key(spec)
+            if key not in instances:
+                instances[key] = InstanceRecord.from_spec(spec, facts.get(key))
+            return DesignRecord.from_dict(row, instances[key])
+
+        return cls(design(row) for row in rows)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return Records(self._designs[index])
+        return self._designs[index]
+
+    def __len__(self) -> int:
+        return len(self._designs)
+
+    def __iter__(self):
+        return iter(self._designs)
+
+    def __repr__(self) -> str:
+        return f"Records({len(self)} designs on {len(self.instances)} instances)"
+
+    def filter(self, predicate: Callable[[DesignRecord], bool]) -> Records:
+        """The designs for which ``predicate`` is true."""
+        return Records(r for r in self if predicate(r))
+
+    def group(self, key: Callable[[DesignRecord], Hashable]) -> dict[Hashable, Records]:
+        """``key(design)`` -> the designs with that key."""
+        groups: dict[Hashable, list] = {}
+        for r in self:
+            groups.setdefault(key(r), []).append(r)
+        return {k: Records(v) for k, v in groups.items()}
+
+    @cached_property
+    def instances(self) -> tuple[InstanceRecord, ...]:
+        """Every instance with a design here, once."""
+        return tuple(dict.fromkeys(r.instance for r in self))
+
+    @cached_property
+    def by_instance(self) -> dict[str, Records]:
+        """Instance key -> its designs."""
+        return self.group(lambda r: r.instance.key)
+
+    @cached_property
+    def by_panel(self) -> dict[tuple, Records]:
+        """Panel (:func:`panel_key`) -> its designs."""
+        return self.group(lambda r: r.instance.panel)
+
+    @cached_property
+    def by_label(self) -> dict[str, Records]:
+        """Label -> its designs."""
+        return self.group(lambda r: r.label)
+
+    @cached_property
+    def by_panel_label(self) -> dict[tuple, Records]:
+        """(panel, label) -> the designs of that label on that panel."""
+        return self.group(lambda r: (r.instance.panel, r.label))
+
+    def to_pandas(self, members: dict | None = None):
+        """The analysis table, one row per design: :func:`compare.export.designs_frame`."""
+        from .export import designs_frame
+
+        return designs_frame(self, members)
+
+
+def as_records(records: Iterable) -> Records:
+    """``records`` as :class:`Records`: as they are, or from dicts or DesignRecords (:meth:`Records.from_rows`)."""
+    return records if isinstance(records, Records) else Records.from_rows(records)

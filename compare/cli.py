@@ -25,7 +25,7 @@ PRESET_TIMES = {
     "table1-small": "~1-2 min (estimated from table1's per-run times, not measured)",
     "table1": "~31 min (1871 s measured)",
     "tradeoff": "~82 min (4909 s measured)",
-    "systems": "~23 min (1405 s measured)",
+    "systems": "~8 min (470 s measured)",
 }
 
 

@@ -56,7 +56,13 @@ from codesign.methods import method
 from ._common import Timer
 from ._sparse import DecentralizedCache, check_gammas, design_on_pattern, with_diagonal_end
 
-__all__ = ["sparse_sdp", "SparseSDP", "SDP_GAMMAS"]
+__all__ = ["sparse_sdp", "SparseSDP", "SDP_GAMMAS", "SDP_MAX_STATES"]
+
+#: Largest plant (states) the path solves by default. Measured on 2 cores: ~40 s per γ at
+#: 50 states (paper family, N = 50) and ~30 s at 40 (mass-spring chain, N = 20), but more than
+#: 22 minutes for one γ at 100 (chain, N = 50): the 2n x 2n LMI's cost grows steeply with n,
+#: and a 10-γ path there would run for hours.
+SDP_MAX_STATES = 64
 
 #: Default weights (normalized units): from an (almost) dense gain to a few links on
 #: the paper's family; the path is closed by the diagonal gain at γ = inf.
@@ -277,6 +283,7 @@ def sparse_sdp(
     polish: bool = True,
     threshold: float = 1e-4,
     max_iter: int = 200,
+    max_states: int = SDP_MAX_STATES,
     diagonal_end: bool = True,
 ):
     """Sparse static gains along a γ path by the ℓ1-regularized SDP, polished on their patterns.
@@ -295,6 +302,11 @@ def sparse_sdp(
     max_iter : int
         Clarabel's iteration limit; a solve that hits it is a ``failed`` design
         (cvxpy status ``user_limit``).
+    max_states : int
+        Size guard: on a plant with more states than this, no SDP is compiled and
+        every γ is a ``failed`` design that says so, at once (see
+        :data:`SDP_MAX_STATES` for the measured times behind the default); raise it
+        to run larger plants anyway.
     diagonal_end : bool
         Close the path with the decentralized gain as its γ → ∞ point
         (``params["gamma"] = inf``).
@@ -313,10 +325,21 @@ def sparse_sdp(
         raise ValueError(f"threshold must be in [0, 1), got {threshold!r}")
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
         raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+    if isinstance(max_states, bool) or not isinstance(max_states, (int, np.integer)) or max_states < 1:
+        raise ValueError(f"max_states must be a positive integer, got {max_states!r}")
     gammas = check_gammas(SDP_GAMMAS if gammas is None else gammas)
+    decentral = DecentralizedCache(instance)
+    base = {"threshold": float(threshold)}
+    if instance.n > max_states:
+        why = (f"the l1 SDP is not run on {instance.n} states (max_states = {max_states}): its "
+               f"{2 * instance.n} x {2 * instance.n} LMI takes over 20 minutes per gamma at 100 states; "
+               f"pass max_states to run it anyway")
+        designs = [Design.failure("sparse_sdp", {"gamma": float(g), **base}, "failed", why,
+                                  info_model="instantaneous", extras={"solver": "CLARABEL", "size_guard": True})
+                   for g in gammas]
+        return with_diagonal_end(designs, "sparse_sdp", base, decentral) if diagonal_end else designs
     with Timer() as compile_timer:
         sdp = SparseSDP(instance, max_iter=max_iter)
-    decentral = DecentralizedCache(instance)
     designs = []
     for gamma in gammas:
         params = {"gamma": float(gamma), "threshold": float(threshold)}
@@ -341,5 +364,4 @@ def sparse_sdp(
         designs.append(replace(design, seconds=float(timer.seconds)))
     if designs:
         designs[0] = replace(designs[0], extras={**designs[0].extras, "compile_seconds": compile_timer.seconds})
-    base = {"threshold": float(threshold)}
     return with_diagonal_end(designs, "sparse_sdp", base, decentral) if diagonal_end else designs

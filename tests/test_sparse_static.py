@@ -262,6 +262,20 @@ def test_sdp_iteration_limit_is_a_recorded_failure():
     assert "user_limit" in design.message
 
 
+def test_sdp_size_guard_fails_fast_with_a_reason():
+    inst = paper_instance(0, n=6)
+    designs = sparse_sdp(inst, gammas=[1e-3, 0.1], max_states=5)
+    assert [d.status for d in designs] == ["failed", "failed"]  # no diagonal end without a usable point
+    assert [d.params["gamma"] for d in designs] == [1e-3, 0.1]
+    assert all("6 states" in d.message and "max_states = 5" in d.message for d in designs)
+    assert all(d.extras["size_guard"] and d.controller is None for d in designs)
+    # At the limit the path is solved as usual.
+    assert all(d.status == "optimal" for d in sparse_sdp(inst, gammas=[1e-3], max_states=6))
+    for bad in (0, 2.5, True):
+        with pytest.raises(ValueError, match="max_states"):
+            sparse_sdp(inst, gammas=[1e-3], max_states=bad)
+
+
 def test_unpolished_points_are_exact_too():
     inst = paper_instance(1, n=8)
     designs = sparse_admm(inst, gammas=[1e-4, 1e-3], polish=False, diagonal_end=False)

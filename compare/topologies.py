@@ -16,11 +16,22 @@ def _leading_eigenvector(A: np.ndarray) -> np.ndarray:
     return np.abs(np.real(V[:, np.argmax(np.abs(w))]))
 
 
+def _collinear(pos) -> bool:
+    """Whether a layout puts every node on one line (a chain's): straight edges would hide behind each other."""
+    xy = np.array(list(pos.values()), dtype=float)
+    xy -= xy.mean(axis=0)
+    s = np.linalg.svd(xy, compute_uv=False)
+    return bool(s.size < 2 or s[1] <= 1e-2 * s[0])
+
+
 def _draw(ax, adj, pos, colors, title):
     graph = nx.DiGraph()
     graph.add_nodes_from(range(adj.shape[0]))
     graph.add_edges_from((j, i) for i, j in zip(*np.nonzero(adj)) if i != j)  # S_ij != 0: j sends to i
-    nx.draw_networkx_edges(graph, pos, ax=ax, width=0.6, alpha=0.5, arrows=True, arrowsize=5, node_size=60)
+    # On a line, arcs (an arc diagram: links one way bend to one side, the other way to the other).
+    style = "arc3,rad=0.4" if _collinear(pos) else "arc3"
+    nx.draw_networkx_edges(graph, pos, ax=ax, width=0.6, alpha=0.5, arrows=True, arrowsize=5, node_size=60,
+                           connectionstyle=style)
     nodes = nx.draw_networkx_nodes(graph, pos, ax=ax, node_size=60, node_color=colors, cmap="Reds",
                                    vmin=0, vmax=max(colors.max(), 1e-12), edgecolors="0.3", linewidths=0.5)
     ax.set_title(title, fontsize=8)

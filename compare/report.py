@@ -124,19 +124,9 @@ def budget_costs(records, budgets=(20, 60, 140, None)) -> dict:
     its designs with at most b links (None = any number); instances where no design
     fits count as missing. Returns ``{(panel, label): [(median, instances), ...]}``.
     """
-    best: dict[tuple, dict] = defaultdict(lambda: defaultdict(dict))
-    for r in as_records(records):
-        if not r.ok:
-            continue
-        key = (r.instance.panel, r.label)
-        for b in budgets:
-            if b is None or r.links <= b:
-                current = best[key][b].get(r.instance.key, float("inf"))
-                best[key][b][r.instance.key] = min(current, r.cost)
-    return {
-        key: [(quartiles(list(per[b].values()))[1], len(per[b])) for b in budgets]
-        for key, per in sorted(best.items())
-    }
+    grid = [np.inf if b is None else b for b in budgets]
+    return {key: [(quartiles(column)[1], int(np.isfinite(column).sum())) for column in best.T]
+            for key, best in best_tables(records, grid).items() if np.isfinite(best).any()}
 
 
 def plant_links(records) -> dict:

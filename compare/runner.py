@@ -8,7 +8,6 @@ store are skipped, so an interrupted sweep resumes where it stopped.
 
 from __future__ import annotations
 
-import json
 import multiprocessing
 import os
 import time
@@ -26,6 +25,7 @@ from codesign.scoring import evaluate
 from .environment import environment
 from .fingerprint import fingerprint_details
 from .plugins import load_plugins
+from .records import canonical_key
 from .registry import get_method
 from .spec import ExperimentSpec, Run
 from .store import Store
@@ -264,15 +264,14 @@ def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store) -> None:
                                           "path_param": m.path_param, "fingerprint": details["fingerprint"]})
         store.set_meta(f"fingerprint:{details['fingerprint']}", {"modules": details["modules"],
                                                                  "versions": details["versions"]})
-    known = {k for k in store.meta() if k.startswith("instance:")}
-    for spec_dict in {json.dumps(run.instance, sort_keys=True): run.instance for run in runs}.values():
-        key = "instance:" + json.dumps(spec_dict, sort_keys=True)
+    known = store.instance_facts()
+    for key, spec_dict in {canonical_key(run.instance): run.instance for run in runs}.items():
         if key not in known:
             try:
                 facts = instance_facts(build_instance(spec_dict))
             except Exception:  # the instance's runs record the failure; the report rebuilds what it needs
                 continue
-            store.set_meta(key, facts)
+            store.set_instance_facts(spec_dict, facts)
 
 
 def run_experiment(

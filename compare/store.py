@@ -26,7 +26,7 @@ import numpy as np
 
 from codesign.controllers import controller_from_arrays
 
-from .records import Records
+from .records import Records, canonical_key
 
 __all__ = ["Store", "StoreError"]
 
@@ -142,6 +142,14 @@ class Store:
     def set_meta(self, key: str, value) -> None:
         with self._conn:
             self._conn.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value, sort_keys=True)))
+
+    def set_instance_facts(self, instance_spec: dict, facts: dict) -> None:
+        """Store what a report needs to know about an instance (:func:`compare.runner.instance_facts`)."""
+        self.set_meta(_FACTS + canonical_key(instance_spec), facts)
+
+    def instance_facts(self) -> dict[str, dict]:
+        """Instance key (:func:`compare.records.canonical_key` of its spec) -> its stored facts."""
+        return {k[len(_FACTS):]: v for k, v in self.meta().items() if k.startswith(_FACTS)}
 
     def set_members(self, experiment: str, keys) -> None:
         """Record which runs make up an experiment now (a run may belong to several).
@@ -284,8 +292,7 @@ class Store:
             for key in ("instance", "params", "extras"):
                 record[key] = json.loads(record[key]) if record[key] else {}
             rows.append(record)
-        facts = {k[len(_FACTS):]: v for k, v in self.meta().items() if k.startswith(_FACTS)}
-        return Records.from_rows(rows, facts)
+        return Records.from_rows(rows, self.instance_facts())
 
     def controller(self, run_key: str, idx: int = 0):
         """Rebuild a stored controller (None if the design had none)."""

@@ -36,8 +36,7 @@ def _store(path, *, facts: bool) -> Store:
         design = Design("m", {"gamma": 0.1}, None, 1.0 + i, 3, 8, "instantaneous", extras={"curve": [1, 2]})
         store.add_run(_Run(f"k{i}", inst, {"gamma": 0.1}), [design], experiment="x", seconds=1.0)
         if facts:
-            store.set_meta("instance:" + json.dumps(inst, sort_keys=True), {"n": 8, "plant_links": 11 + i,
-                                                                           "comm_links": 20})
+            store.set_instance_facts(inst, {"n": 8, "plant_links": 11 + i, "comm_links": 20})
     return store
 
 

@@ -255,7 +255,7 @@ def test_linear_grnn_differs_from_the_tanh_grnn_only_by_the_activation(inst):
     ctrl = linear.controller
     state = ctrl.reset(3)
     _, Z = ctrl.step(state, x)
-    np.testing.assert_allclose(Z, x.T[:, :, None] * ctrl.F)  # Z(1) = x(0) F with no squashing
+    np.testing.assert_allclose(Z, ctrl.F[:, None, None] * x[None])  # Z(1) = x(0) F, no squashing; (h, batch, N)
 
 
 def test_gradient_norm_is_finite_for_huge_float32_gradients():

@@ -72,6 +72,7 @@ def test_controller_reads_each_state_in_its_slot(uneven):
     c = GRNNController(S, F, W, G, uneven.state_nodes, uneven.input_nodes)
     x = rng.standard_normal((2, 8))
     u, Z = c.step(c.reset(2), x)
+    Z = Z.transpose(2, 1, 0)  # the controller keeps Z feature-major, (h, batch, N): node-major here
     # node 0 holds states 0, 4, 7 in slots 0, 1, 2; node 1 holds inputs 1, 2 in slots 0, 1
     np.testing.assert_allclose(Z[0], np.tanh(x[:, [0, 4, 7]] @ F))
     np.testing.assert_allclose(Z[2], np.tanh(x[:, [2]] @ F[:1]))

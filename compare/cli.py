@@ -24,7 +24,7 @@ PRESET_TIMES = {
     "sls-small": "~1 min (estimated from its size, not measured)",
     "table1-small": "~1-2 min (estimated from table1's per-run times, not measured)",
     "table1": "~33 min (1964 s measured)",
-    "tradeoff": "~82 min (4909 s measured)",
+    "tradeoff": "~86 min (5116 s measured)",
     "systems": "~8 min (470 s measured)",
 }
 

@@ -41,18 +41,19 @@ from codesign.grnn import _selection_set
 from codesign.training import ModelSpec, init_fwg, train_stack
 
 
-HIDDEN, BATCH, HORIZON, CURVE_SIZE = 5, 20, 50, 100
+#: The timed run's settings (the paper's): the flop count and the kernel bound use the same.
+HIDDEN, BATCH, HORIZON, CURVE_SIZE, CURVE_EVERY = 5, 20, 50, 100, 10
 
 
 def make_specs(M: int, instances) -> list[ModelSpec]:
     specs = []
     for m in range(M):
         inst = instances[m % len(instances)]
-        F, W, G = init_fwg(np.random.default_rng([m, 1]), 5)
+        F, W, G = init_fwg(np.random.default_rng([m, 1]), HIDDEN)
         specs.append(ModelSpec(
             A=inst.A, B=inst.B, Q=inst.Q, R=inst.R, P=inst.P, trace_P=inst.trace_P,
             S0=inst.gso, mask=inst.comm_adj != 0, F0=F, W0=W, G0=G, data_seed=[m, 0],
-            curve_x0=_selection_set(inst, 100), lr=0.02,
+            curve_x0=_selection_set(inst, CURVE_SIZE), lr=0.02,
         ))
     return specs
 
@@ -62,11 +63,11 @@ def _train_share(args):
     torch.set_num_threads(threads)
     instances = [paper_instance(seed, n=n) for seed in range(min(M, 8))]
     specs = make_specs(M, instances)[offset:offset + count]
-    train_stack(specs[:2], steps=2, dtype=dtype)  # warm-up (allocator, BLAS)
+    train_stack(specs[:2], steps=2, batch=BATCH, horizon=HORIZON, dtype=dtype)  # warm-up (allocator, BLAS)
     if barrier is not None:
         barrier.wait()
     start = time.perf_counter()
-    train_stack(specs, steps=steps, dtype=dtype, curve_every=10)
+    train_stack(specs, steps=steps, batch=BATCH, horizon=HORIZON, dtype=dtype, curve_every=CURVE_EVERY)
     return start, time.perf_counter()
 
 
@@ -88,7 +89,7 @@ def seconds_per_model(M: int, steps: int, dtype: str, threads: int, procs: int, 
     return wall / M * (750 / steps)
 
 
-def training_flops(N: int, steps: int = 750, curve_every: int = 10, h: int = HIDDEN, B: int = BATCH,
+def training_flops(N: int, steps: int = 750, curve_every: int = CURVE_EVERY, h: int = HIDDEN, B: int = BATCH,
                    T: int = HORIZON, curve_size: int = CURVE_SIZE) -> float:
     """Floating-point operations of one model's training (one state and input per node, Q = R = I).
 
@@ -190,7 +191,7 @@ def main(argv=None) -> None:
     dtypes = ("float64", "float32") if args.dtype == "both" else (args.dtype,)
     cores = args.procs * args.threads
     torch.set_num_threads(1)
-    print(f"GRNN training, N=20 T={HORIZON} batch={BATCH} h={HIDDEN}, {args.steps} steps timed (curve every 10 on "
+    print(f"GRNN training, N=20 T={HORIZON} batch={BATCH} h={HIDDEN}, {args.steps} steps timed (curve every {CURVE_EVERY} on "
           f"{CURVE_SIZE} draws), {args.procs} process(es) x {args.threads} torch thread(s); torch {torch.__version__}, "
           f"{torch.backends.cpu.get_cpu_capability()}")
     flops = training_flops(20)

@@ -37,10 +37,30 @@ Frobenius norms) zeroes whole node blocks, as in :mod:`baselines.sparse_admm`.
 The 2n × 2n LMI dominates the cost: with 20 masses (n = 40 states) a solve
 takes about 20 s on one core.
 
-γ is a :class:`cvxpy.Parameter`, so a path compiles once; Clarabel solves it.
-Interior-point solvers return no exact zeros: Y is thresholded relative to
-max |Y| (on node blocks: block norms relative to the largest block norm) before
-the pattern is polished on the exact benchmark cost.
+γ is a :class:`cvxpy.Parameter`, so a path compiles once. Two solvers, and
+``solver="auto"`` (the default) picks SCS on one-state nodes and Clarabel on node
+blocks:
+
+- ``"scs"``: SCS, a first-order (operator-splitting) conic solver. One
+  iteration costs a factorization solve it caches and one eigendecomposition of
+  the 2n × 2n LMI block, so a solve is about 20x faster than Clarabel's at
+  N = 50 (about 2 s per γ against 40-45 s) and still runs at N = 100.
+  Tolerance ``eps`` (absolute and relative), SCS's ``scale`` = 10 (measured:
+  about half the iterations of its default 0.1 on the paper family), and every γ
+  solved from a cold start, so a design depends only on its own γ and never on
+  the rest of the path. On node blocks it is no faster and lands elsewhere: on the
+  20-mass chain (γ = 1e-3, 1e-2, 3e-2) 114 s against Clarabel's 56, with 114, 74
+  and 72 links where Clarabel finds 134, 94 and 86 (one solve at its iteration
+  limit), so ``auto`` keeps Clarabel there.
+- ``"clarabel"``: the interior-point reference. Each iteration factors the KKT
+  system, whose PSD block is dense ((2n)(2n + 1)/2 = 5050 rows at n = 50), so its
+  cost grows like n⁶: 40-45 s per γ at N = 50, over 20 minutes at 100 states.
+
+Neither returns exact zeros: Y is thresholded relative to max |Y| (on node
+blocks: block norms relative to the largest block norm) before the pattern is
+polished on the exact benchmark cost, so both solvers give the same design when
+they give the same pattern (``benchmarks/bench_sparse.py`` and the tests compare
+them).
 """
 
 from __future__ import annotations
@@ -56,13 +76,39 @@ from codesign.methods import method
 from ._common import Timer
 from ._sparse import DecentralizedCache, check_gammas, design_on_pattern, with_diagonal_end
 
-__all__ = ["sparse_sdp", "SparseSDP", "SDP_GAMMAS", "SDP_MAX_STATES"]
+__all__ = ["sparse_sdp", "SparseSDP", "SDP_GAMMAS", "SDP_MAX_STATES", "SDP_SOLVERS", "default_solver"]
 
-#: Largest plant (states) the path solves by default. Measured on 2 cores: ~40 s per γ at
-#: 50 states (paper family, N = 50) and ~30 s at 40 (mass-spring chain, N = 20), but more than
-#: 22 minutes for one γ at 100 (chain, N = 50): the 2n x 2n LMI's cost grows steeply with n,
-#: and a 10-γ path there would run for hours.
-SDP_MAX_STATES = 64
+#: Packages whose version enters this method's code fingerprint besides the common ones
+#: (:mod:`compare.fingerprint`): a new SCS can move a pattern, so it reruns the paths.
+FINGERPRINT_PACKAGES = ("scs",)
+
+#: The solvers a path can use (the ``solver`` hyperparameter, whose default ``"auto"`` is
+#: :func:`default_solver`).
+SDP_SOLVERS = ("scs", "clarabel")
+
+#: Largest plant (states) the path solves by default, per solver. Clarabel, measured on
+#: 2 cores: ~40 s per γ at 50 states (paper family, N = 50) and ~30 s at 40 (mass-spring
+#: chain, N = 20), but more than 22 minutes for one γ at 100 (chain, N = 50): a 10-γ path
+#: there would run for hours. SCS: 8-170 s per γ at 100 states (paper family, N = 100), and
+#: each iteration's eigendecomposition grows like n³ with more iterations as n grows.
+SDP_MAX_STATES = {"scs": 128, "clarabel": 64}
+
+#: Iteration limits when ``max_iter`` is not given: Clarabel's own default, and for SCS
+#: a cap above the paper family's hardest γ at N = 100 (about 13,500 iterations, ~170 s).
+_DEFAULT_MAX_ITER = {"scs": 20000, "clarabel": 200}
+
+#: What the size guard's message says per solver (from the measurements above).
+_SIZE_GUARD_REASON = {
+    "scs": "SCS takes up to 3 minutes per gamma at 100 states, and far longer beyond 128",
+    "clarabel": "its 2n x 2n LMI takes over 20 minutes per gamma at 100 states with Clarabel",
+}
+
+#: SCS's settings besides the tolerance and the iteration limit (see the module docstring).
+_SCS_OPTIONS = {"scale": 10.0, "warm_start": False}
+
+#: SCS's default tolerance (absolute and relative): 1e-6 gave the same patterns on the paper
+#: family at N = 20 and 50 and took 1.2-2x the iterations.
+SCS_EPS = 1e-5
 
 #: Default weights (normalized units): from an (almost) dense gain to a few links on
 #: the paper's family; the path is closed by the diagonal gain at γ = inf.
@@ -71,6 +117,20 @@ SDP_GAMMAS = tuple(float(g) for g in np.geomspace(1e-4, 1.0, 10))
 #: Clarabel's supernodal factorization (faer) handles the dense 2n x 2n LMI block
 #: about 3x faster than its default QDLDL; one thread, so sweeps can run in parallel.
 _CLARABEL_OPTIONS = {"direct_solve_method": "faer", "max_threads": 1}
+
+
+def default_solver(instance) -> str:
+    """The solver ``solver="auto"`` takes: SCS on one-state nodes, Clarabel on node blocks."""
+    return "scs" if instance.scalar_nodes else "clarabel"
+
+
+def resolve_solver(solver: str, instance) -> str:
+    """``solver`` checked, with ``"auto"`` replaced by :func:`default_solver`."""
+    if solver == "auto":
+        return default_solver(instance)
+    if solver not in SDP_SOLVERS:
+        raise ValueError(f"unknown SDP solver {solver!r}; choose one of auto, {', '.join(SDP_SOLVERS)}")
+    return solver
 
 
 def _cvxpy():
@@ -87,13 +147,20 @@ class SparseSDP:
     Parameters
     ----------
     instance : Instance
-    max_iter : int
-        Clarabel's iteration limit (its default, 200).
+    solver : {"auto", "scs", "clarabel"}
+        See the module docstring; ``auto`` is :func:`default_solver`.
+    max_iter : int, optional
+        The solver's iteration limit; default 20000 for SCS, 200 (its own default)
+        for Clarabel.
+    eps : float
+        SCS's absolute and relative tolerance (Clarabel keeps its own, tighter ones).
     """
 
-    def __init__(self, instance, *, max_iter: int = 200):
+    def __init__(self, instance, *, solver: str = "auto", max_iter: int | None = None, eps: float = SCS_EPS):
         cp = self._cp = _cvxpy()
-        self.max_iter = max_iter
+        solver = self.solver = resolve_solver(solver, instance)
+        self.max_iter = _DEFAULT_MAX_ITER[solver] if max_iter is None else max_iter
+        self.eps = eps
         self.instance = instance
         self.blocks = not instance.scalar_nodes
         self.gamma = cp.Parameter(nonneg=True, name="gamma")
@@ -175,24 +242,29 @@ class SparseSDP:
         self.gamma.value = float(gamma) * self.instance.trace_P
         out = {"K": None, "Y": None, "x": None, "bound": float("nan"), "solve_time": float("nan"),
                "iterations": -1, "message": ""}
-        options = {**_CLARABEL_OPTIONS, "max_iter": int(self.max_iter)}
         try:
-            try:
-                with warnings.catch_warnings():
-                    # cvxpy warns on inaccurate solutions; the status is recorded instead.
-                    warnings.simplefilter("ignore", UserWarning)
-                    self.problem.solve(solver=cp.CLARABEL, **options)
-            except (cp.error.SolverError, ValueError, TypeError):
-                # A Clarabel build without faer: its defaults still solve the problem.
-                self.problem.solve(solver=cp.CLARABEL, max_iter=int(self.max_iter))
+            with warnings.catch_warnings():
+                # cvxpy warns on inaccurate solutions; the status is recorded instead.
+                warnings.simplefilter("ignore", UserWarning)
+                if self.solver == "scs":
+                    self.problem.solve(solver=cp.SCS, eps_abs=self.eps, eps_rel=self.eps,
+                                       max_iters=int(self.max_iter), **_SCS_OPTIONS)
+                else:
+                    self._solve_clarabel()
         except cp.error.SolverError as exc:
-            return {**out, "status": "failed", "cvxpy_status": "solver_error", "message": f"Clarabel failed: {exc}"}
+            return {**out, "status": "failed", "cvxpy_status": "solver_error",
+                    "message": f"{self.solver_name} failed: {exc}"}
         raw = str(self.problem.status)
         stats = self.problem.solver_stats
         out.update(cvxpy_status=raw, status=solver_status(raw),
                    solve_time=float(stats.solve_time or float("nan")), iterations=int(stats.num_iters or -1))
         if raw != "optimal":
             out["message"] = f"SDP solver status {raw}"
+        if self.solver == "scs" and out["iterations"] >= self.max_iter and raw != "optimal_inaccurate":
+            # SCS labels its last iterate at the limit (even "infeasible_inaccurate" after two
+            # iterations): that certifies nothing, so it is a failure, like Clarabel's user_limit.
+            out.update(status="failed", message=f"SCS stopped at its iteration limit ({self.max_iter}) "
+                                                f"with status {raw}; pass a larger max_iter")
         if out["status"] in ("optimal", "inaccurate") and self.blocks and self.Y.value is not None:
             try:
                 out.update(self._block_solution())
@@ -206,6 +278,19 @@ class SparseSDP:
         elif out["status"] in ("optimal", "inaccurate"):
             out.update(status="failed", message=f"SDP solver status {raw} without a solution")
         return out
+
+    @property
+    def solver_name(self) -> str:
+        """The solver's name as cvxpy spells it (``SCS``, ``CLARABEL``), as designs record it."""
+        return self.solver.upper()
+
+    def _solve_clarabel(self):
+        cp = self._cp
+        try:
+            self.problem.solve(solver=cp.CLARABEL, **_CLARABEL_OPTIONS, max_iter=int(self.max_iter))
+        except (cp.error.SolverError, ValueError, TypeError):
+            # A Clarabel build without faer: its defaults still solve the problem.
+            self.problem.solve(solver=cp.CLARABEL, max_iter=int(self.max_iter))
 
     def _block_solution(self) -> dict:
         """Y, the blocks X_i, K = -Y X^-1 (node by node) and the bound, from a node-block solve."""
@@ -251,7 +336,9 @@ class SparseSDP:
         On node blocks "diagonal" means no off-diagonal node block, and γ bounds the
         Frobenius norm of each off-diagonal block of that gradient. ``scale`` defaults
         to 1e6 on scalar nodes and 1e3 on node blocks (where 1e5 and more can break
-        Clarabel's factorization, e.g. on the 6-mass chain).
+        Clarabel's factorization, e.g. on the 6-mass chain). Exact only as far as the
+        solve is: build the problem with ``solver="clarabel"`` (SCS stops near 1e-5 and
+        may call the heavily weighted problem ``optimal_inaccurate``, which raises here).
         """
         if scale is None:
             scale = 1e3 if self.blocks else 1e6
@@ -282,8 +369,10 @@ def sparse_sdp(
     gammas: list | None = None,
     polish: bool = True,
     threshold: float = 1e-4,
-    max_iter: int = 200,
-    max_states: int = SDP_MAX_STATES,
+    solver: str = "auto",
+    eps: float = SCS_EPS,
+    max_iter: int | None = None,
+    max_states: int | None = None,
     diagonal_end: bool = True,
 ):
     """Sparse static gains along a γ path by the ℓ1-regularized SDP, polished on their patterns.
@@ -299,14 +388,23 @@ def sparse_sdp(
     threshold : float
         Off-diagonal entries with |Y_ij| <= threshold * max|Y| are zero; on node
         blocks, off-diagonal blocks with ‖Y_ij‖_F <= threshold * max ‖Y_kl‖_F.
-    max_iter : int
-        Clarabel's iteration limit; a solve that hits it is a ``failed`` design
-        (cvxpy status ``user_limit``).
-    max_states : int
+    solver : {"auto", "scs", "clarabel"}
+        SCS (first-order; 10-25x faster than Clarabel on the paper family at
+        N = 50) or Clarabel (interior point, the exact reference). ``auto`` takes SCS
+        on one-state nodes and Clarabel on node blocks, where SCS is slower and less
+        accurate. See the module docstring.
+    eps : float
+        SCS's absolute and relative tolerance; unused by Clarabel.
+    max_iter : int, optional
+        The solver's iteration limit (default 20000 for SCS, 200 for Clarabel); a
+        solve that stops there is a ``failed`` design (Clarabel: cvxpy status
+        ``user_limit``) or, where SCS's residuals are nearly small enough, an
+        ``inaccurate`` one.
+    max_states : int, optional
         Size guard: on a plant with more states than this, no SDP is compiled and
-        every γ is a ``failed`` design that says so, at once (see
-        :data:`SDP_MAX_STATES` for the measured times behind the default); raise it
-        to run larger plants anyway.
+        every γ is a ``failed`` design that says so, at once. Default
+        :data:`SDP_MAX_STATES` of the solver (128 for SCS, 64 for Clarabel; the
+        measured times behind them are there); raise it to run larger plants anyway.
     diagonal_end : bool
         Close the path with the decentralized gain as its γ → ∞ point
         (``params["gamma"] = inf``).
@@ -323,6 +421,11 @@ def sparse_sdp(
     """
     if not (np.isfinite(threshold) and 0 <= threshold < 1):
         raise ValueError(f"threshold must be in [0, 1), got {threshold!r}")
+    solver = resolve_solver(solver, instance)
+    if not (isinstance(eps, (int, float)) and not isinstance(eps, bool) and 0 < eps < 1):
+        raise ValueError(f"eps must be in (0, 1), got {eps!r}")
+    max_iter = _DEFAULT_MAX_ITER[solver] if max_iter is None else max_iter
+    max_states = SDP_MAX_STATES[solver] if max_states is None else max_states
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
         raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
     if isinstance(max_states, bool) or not isinstance(max_states, (int, np.integer)) or max_states < 1:
@@ -331,21 +434,20 @@ def sparse_sdp(
     decentral = DecentralizedCache(instance)
     base = {"threshold": float(threshold)}
     if instance.n > max_states:
-        why = (f"the l1 SDP is not run on {instance.n} states (max_states = {max_states}): its "
-               f"{2 * instance.n} x {2 * instance.n} LMI takes over 20 minutes per gamma at 100 states; "
-               f"pass max_states to run it anyway")
+        why = (f"the l1 SDP is not run on {instance.n} states (max_states = {max_states}): "
+               f"{_SIZE_GUARD_REASON[solver]}; pass max_states to run it anyway")
         designs = [Design.failure("sparse_sdp", {"gamma": float(g), **base}, "failed", why,
-                                  info_model="instantaneous", extras={"solver": "CLARABEL", "size_guard": True})
+                                  info_model="instantaneous", extras={"solver": solver.upper(), "size_guard": True})
                    for g in gammas]
         return with_diagonal_end(designs, "sparse_sdp", base, decentral) if diagonal_end else designs
     with Timer() as compile_timer:
-        sdp = SparseSDP(instance, max_iter=max_iter)
+        sdp = SparseSDP(instance, solver=solver, max_iter=max_iter, eps=float(eps))
     designs = []
     for gamma in gammas:
         params = {"gamma": float(gamma), "threshold": float(threshold)}
         with Timer() as timer:
             result = sdp.solve(gamma)
-            extras = {"solver": "CLARABEL", "solver_status": result["cvxpy_status"],
+            extras = {"solver": sdp.solver_name, "solver_status": result["cvxpy_status"],
                       "solve_time": result["solve_time"], "iterations": result["iterations"],
                       "sdp_bound": result["bound"] / instance.trace_P}
             if result["K"] is None:

@@ -3,7 +3,9 @@
 A method's fingerprint hashes the source of its module and of every project module
 that module uses (followed through its globals, transitively), the project's
 evaluation code (instances, designs, controllers, evaluation, scoring), and the
-versions of the numerical packages its numbers depend on. Editing one method's
+versions of the numerical packages its numbers depend on (those every method uses, and
+those a module of the closure names in ``FINGERPRINT_PACKAGES``, e.g. the ℓ1 SDP's
+``("scs",)``). Editing one method's
 file changes that method's fingerprint only; editing the evaluation code changes
 every fingerprint.
 """
@@ -100,7 +102,10 @@ def fingerprint_details(modules) -> dict:
     if key not in _CACHE:
         closure = _closure(list(EVALUATION_MODULES) + list(modules))
         sources = {m.__name__: _source_hash(m) for m in closure}
-        versions = package_versions()
+        # A solver only some methods use enters only their fingerprints (and leaves the
+        # others' text, hence their stored runs, as they were).
+        extra = sorted({p for m in closure for p in getattr(m, "FINGERPRINT_PACKAGES", ())} - set(NUMERIC_PACKAGES))
+        versions = package_versions(NUMERIC_PACKAGES + tuple(extra))
         text = json.dumps({"modules": sources, "versions": versions}, sort_keys=True)
         _CACHE[key] = {"fingerprint": hashlib.sha256(text.encode()).hexdigest()[:16], "modules": sources,
                        "versions": versions}

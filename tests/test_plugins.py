@@ -281,3 +281,14 @@ def test_a_worker_that_cannot_load_a_plugin_stops_the_run_with_a_message(tmp_pat
     missing = Plugin(ref="gone.py", target=str(tmp_path / "gone.py"))
     with pytest.raises(WorkerSetupError, match=r"could not load method 'lqr' \(plug-ins: gone.py\).*every worker"):
         execute_task(spec.runs(), [missing])
+
+
+def test_a_solver_only_one_method_uses_enters_only_its_fingerprint():
+    import compare.registry  # noqa: F401  (the built-ins)
+    from codesign import get_method
+    from compare.fingerprint import NUMERIC_PACKAGES, fingerprint_details
+
+    sdp = fingerprint_details(get_method("sparse_sdp").modules)["versions"]
+    admm = fingerprint_details(get_method("sparse_admm").modules)["versions"]
+    assert "scs" in sdp and "scs" not in NUMERIC_PACKAGES
+    assert set(admm) == set(NUMERIC_PACKAGES)

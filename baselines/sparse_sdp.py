@@ -43,12 +43,16 @@ blocks:
 
 - ``"scs"``: SCS, a first-order (operator-splitting) conic solver. One
   iteration costs a factorization solve it caches and one eigendecomposition of
-  the 2n × 2n LMI block, so a solve is about 20x faster than Clarabel's at
-  N = 50 (about 2 s per γ against 40-45 s) and still runs at N = 100.
+  the 2n × 2n LMI block, so a solve is 24-34x faster than Clarabel's at
+  N = 50 (1.4-2.5 s per γ against 39-63 s in one benchmark run) and still runs at
+  N = 100 (about 100 s per γ).
   Tolerance ``eps`` (absolute and relative), SCS's ``scale`` = 10 (measured:
-  about half the iterations of its default 0.1 on the paper family), and every γ
-  solved from a cold start, so a design depends only on its own γ and never on
-  the rest of the path. On node blocks it is no faster and lands elsewhere: on the
+  about half the iterations of its default 0.1 on the paper family), and each γ
+  started from the previous γ's solution (the path runs in increasing γ): from a
+  cold start the diagonal end of the path at N = 100 needs over 20,000 iterations
+  per γ (3 of 10 points stopped at the limit, 1002 s for the path); warm, one
+  (994 s). A design can then differ from a lone solve at its γ only in entries
+  within SCS's tolerance of the threshold. On node blocks it is no faster and lands elsewhere: on the
   20-mass chain (γ = 1e-3, 1e-2, 3e-2) 114 s against Clarabel's 56, with 114, 74
   and 72 links where Clarabel finds 134, 94 and 86 (one solve at its iteration
   limit), so ``auto`` keeps Clarabel there.
@@ -89,8 +93,9 @@ SDP_SOLVERS = ("scs", "clarabel")
 #: Largest plant (states) the path solves by default, per solver. Clarabel, measured on
 #: 2 cores: ~40 s per γ at 50 states (paper family, N = 50) and ~30 s at 40 (mass-spring
 #: chain, N = 20), but more than 22 minutes for one γ at 100 (chain, N = 50): a 10-γ path
-#: there would run for hours. SCS: 8-170 s per γ at 100 states (paper family, N = 100), and
-#: each iteration's eigendecomposition grows like n³ with more iterations as n grows.
+#: there would run for hours. SCS: about 100 s per γ at 100 states (paper family, N = 100; the
+#: 10-γ path 994 s), and each iteration's eigendecomposition grows like n³, with more
+#: iterations as n grows.
 SDP_MAX_STATES = {"scs": 128, "clarabel": 64}
 
 #: Iteration limits when ``max_iter`` is not given: Clarabel's own default, and for SCS
@@ -99,12 +104,12 @@ _DEFAULT_MAX_ITER = {"scs": 20000, "clarabel": 200}
 
 #: What the size guard's message says per solver (from the measurements above).
 _SIZE_GUARD_REASON = {
-    "scs": "SCS takes up to 3 minutes per gamma at 100 states, and far longer beyond 128",
+    "scs": "a 10-gamma path takes about 17 minutes at 100 states with SCS, and far longer beyond 128",
     "clarabel": "its 2n x 2n LMI takes over 20 minutes per gamma at 100 states with Clarabel",
 }
 
 #: SCS's settings besides the tolerance and the iteration limit (see the module docstring).
-_SCS_OPTIONS = {"scale": 10.0, "warm_start": False}
+_SCS_OPTIONS = {"scale": 10.0, "warm_start": True}
 
 #: SCS's default tolerance (absolute and relative): 1e-6 gave the same patterns on the paper
 #: family at N = 20 and 50 and took 1.2-2x the iterations.

@@ -65,6 +65,10 @@ def describe(name, n, a_norm, designs, total):
     if name == "sparse_sdp (scs)" and n == 100 and gammas == 10:
         line += f"  [target < {SDP_PATH_N100:g} s: {'met' if total < SDP_PATH_N100 else 'MISSED'}]"
     print(line, flush=True)
+    for d in designs:
+        if d.status != "optimal":
+            print(f"    gamma {d.params['gamma']:.3g}: {d.status} after {d.extras.get('iterations', '?')} iterations "
+                  f"({d.extras.get('solve_time', float('nan')):.1f} s): {d.message}", flush=True)
     return per_gamma
 
 

@@ -292,3 +292,12 @@ def test_a_solver_only_one_method_uses_enters_only_its_fingerprint():
     admm = fingerprint_details(get_method("sparse_admm").modules)["versions"]
     assert "scs" in sdp and "scs" not in NUMERIC_PACKAGES
     assert set(admm) == set(NUMERIC_PACKAGES)
+    # A plug-in module can name its own solver the same way.
+    import types
+
+    mine = types.ModuleType("my_method_with_a_solver")
+    mine.FINGERPRINT_PACKAGES = ("pytest",)
+    with_solver = fingerprint_details([mine])
+    assert "pytest" in with_solver["versions"]
+    plain = types.ModuleType("my_method_with_a_solver")
+    assert fingerprint_details([plain])["fingerprint"] != with_solver["fingerprint"]

@@ -194,8 +194,8 @@ def main(argv=None) -> None:
     print(f"GRNN training, N=20 T={HORIZON} batch={BATCH} h={HIDDEN}, {args.steps} steps timed (curve every {CURVE_EVERY} on "
           f"{CURVE_SIZE} draws), {args.procs} process(es) x {args.threads} torch thread(s); torch {torch.__version__}, "
           f"{torch.backends.cpu.get_cpu_capability()}")
-    flops = training_flops(20)
-    print(f"arithmetic per 750-step model: {flops / 1e9:.2f} GFLOP (training {training_flops(20, curve_every=0) / 1e9:.2f}"
+    flops, train_flops = training_flops(20), training_flops(20, curve_every=0)
+    print(f"arithmetic per 750-step model: {flops / 1e9:.2f} GFLOP (training {train_flops / 1e9:.2f}"
           f" + validation curve)")
     print(f"{'dtype':8} {'M':>4} {'s / model':>10} {'s / model / core':>17} {'GFLOP/s / core':>15} "
           f"{'matmul peak':>12} {'of peak':>8}")
@@ -211,7 +211,7 @@ def main(argv=None) -> None:
         per_stack = -(-args.models // args.procs)
         bound = kernel_bound(per_stack, dtype)
         print(f"{dtype:8} kernel bound at M={per_stack} per process: {bound:.3f} s / model / core "
-              f"(training only: {training_flops(20, curve_every=0) / bound / 1e9:.1f} GFLOP/s); the trainer takes "
+              f"(training only: {train_flops / bound / 1e9:.1f} GFLOP/s); the trainer takes "
               f"{many * cores / bound:.2f}x that with its validation curve")
     for n in args.sizes:
         wall = seconds_per_model(args.large_models, args.large_steps, "float32", 1, 1, n=n)

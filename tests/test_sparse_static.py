@@ -260,6 +260,8 @@ def test_sdp_iteration_limit_is_a_recorded_failure(solver, why):
     (design,) = sparse_sdp(inst, gammas=[0.01], max_iter=2, solver=solver, diagonal_end=False)
     assert design.status == "failed" and design.controller is None
     assert why in design.message
+    if solver == "clarabel":
+        assert design.extras["solver_status"] == "user_limit"
 
 
 def test_sdp_rejects_unknown_solver_and_bad_eps():

@@ -19,7 +19,7 @@ __all__ = ["main"]
 #: Approximate wall time of ``compare run PRESET`` on 2 cores (2 workers), report included.
 #: A preset missing here is listed as "not measured".
 PRESET_TIMES = {
-    "quick": "~3-4 min (172-228 s measured)",
+    "quick": "~3-4 min (172-242 s measured)",
     "baselines-small": "~1 min (estimated from its size, not measured)",
     "sls-small": "~1 min (estimated from its size, not measured)",
     "table1-small": "~1-2 min (estimated from table1's per-run times, not measured)",

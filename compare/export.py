@@ -12,7 +12,9 @@ and ``compare export`` all use it. Columns, in order:
   ``hops``, ``horizon``, ``seed`` (and any other field an instance carries);
 * the outcome: ``cost``, ``cost_stderr``, ``cost_kind``, ``links``,
   ``self_loops``, ``info_model``, ``status``, ``message``, ``seconds``,
-  ``controller_kind``, ``fingerprint``;
+  ``controller_kind``, ``fingerprint``, and of the run that made it: ``run_seconds``
+  (wall time, scoring included), ``run_designs`` and ``run_peak_mb`` (its process's
+  peak resident memory, MB);
 * one column per hyperparameter found in any design (``gamma``, ``beta``,
   ``steps``, ...), empty (NaN) where a design has none. A hyperparameter named
   like a column above (``seed`` of a learned method, ``horizon`` of SLS) is
@@ -50,7 +52,7 @@ FORMATS = {"csv": "designs.csv", "parquet": "designs.parquet"}
 _IDENTITY = ("experiment", "experiments", "run_key", "idx", "method", "label")
 _INSTANCE_ORDER = ("family", "n", "degree", "a_norm", "b_norm", "hops", "horizon", "seed")
 _OUTCOME = ("cost", "cost_stderr", "cost_kind", "links", "self_loops", "info_model", "status", "message",
-            "seconds", "controller_kind", "fingerprint")
+            "seconds", "controller_kind", "fingerprint", "run_seconds", "run_designs", "run_peak_mb")
 _INSTALL = "pip install -e \".[analysis]\" (from a checkout) or pip install \"grnn-codesign[analysis]\""
 
 
@@ -146,7 +148,7 @@ def designs_frame(records, members: dict | None = None):
     for key in instance_keys:
         columns[key] = _column(pd, [r.instance.spec.get(key) for r in records], numbers="int")
     for key in _OUTCOME:
-        numbers = "float" if key in ("cost", "cost_stderr", "seconds") else "int"
+        numbers = "float" if key in ("cost", "cost_stderr", "seconds", "run_seconds", "run_peak_mb") else "int"
         columns[key] = _column(pd, [getattr(r, key) for r in records], numbers=numbers)
     for key, name in param_columns.items():
         columns[name] = _column(pd, [r.params.get(key) for r in records], numbers="float")

@@ -118,6 +118,9 @@ class DesignRecord:
     ``params`` and ``extras`` are read-only mappings (values nested in them, such as
     training curves, are not copied); ``params_key`` is the canonical JSON of
     ``params``. ``cost`` and ``cost_stderr`` are NaN where the store has none.
+    ``run_seconds``, ``run_designs`` and ``run_peak_mb`` describe the run that made the
+    design (wall seconds including scoring, its number of designs, and its process's
+    peak resident memory in MB); None where unknown.
     """
 
     run_key: str
@@ -140,6 +143,9 @@ class DesignRecord:
     controller_kind: str | None
     extras: Mapping[str, Any] = field(hash=False, repr=False)
     fingerprint: str | None
+    run_seconds: float | None = field(default=None, repr=False)
+    run_designs: int | None = field(default=None, repr=False)
+    run_peak_mb: float | None = field(default=None, repr=False)
 
     @classmethod
     def from_dict(cls, row: Mapping, instance: InstanceRecord | None = None) -> DesignRecord:

@@ -718,6 +718,11 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
                   "invariant on this family, so no convex delay-constrained design with the GRNN's "
                   "information model exists there (docs/information-models.md).", ""]
     lines += _learning_sections(records, out, files, load_controller, meta, members)
+    names, timed = _experiments_with("compute", records, meta, members)
+    if timed:
+        from .compute_report import compute_section
+
+        lines += compute_section(timed, out, files, styles, _save_figure)
     lines += _fingerprint_lines(records, meta)
     lines += ["## Runs by status", "", "| status | designs |", "|---|---:|"]
     lines += [f"| {status} | {count} |" for status, count in sorted(statuses.items())]

@@ -68,25 +68,72 @@ def _failed(run: Run, exc: Exception) -> list[Design]:
     return [Design.failure(run.method, run.params, "failed", f"{type(exc).__name__}: {exc}")]
 
 
-def execute_run(run: Run) -> tuple[list[Design], float]:
-    """Run one method on one instance and score its designs; any exception becomes a ``failed`` design."""
+_STATUS_FILE = "/proc/self/status"
+_CLEAR_REFS = "/proc/self/clear_refs"
+
+
+def _reset_peak_memory() -> bool:
+    """Start a new resident-memory high-water mark for this process (Linux); False where unsupported."""
+    try:
+        with open(_CLEAR_REFS, "w") as f:
+            f.write("5")  # proc(5): "5" resets the peak resident set size (VmHWM) to the current one
+        return True
+    except OSError:
+        return False
+
+
+def _peak_memory_mb() -> float | None:
+    """This process's peak resident memory (MB) since the last reset, or None if unknown."""
+    try:
+        with open(_STATUS_FILE) as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+@contextmanager
+def _measured():
+    """Wall seconds and peak resident memory (MB, None if unknown) of the block: ``with _measured() as m``."""
+    watch = {"peak_mb": None}
+    tracked = _reset_peak_memory()
     start = time.perf_counter()
     try:
-        instance = build_instance(run.instance)
-        designs = _evaluated(instance, get_method(run.method)(instance, **run.params), run.evaluation)
-    except Exception as exc:  # a failing method is a recorded status, never a crashed sweep
-        designs = _failed(run, exc)
-    return designs, time.perf_counter() - start
+        yield watch
+    finally:
+        watch["seconds"] = time.perf_counter() - start
+        watch["peak_mb"] = _peak_memory_mb() if tracked else None
 
 
-def execute_task(runs: list[Run], plugins=()) -> list[tuple[list[Design], float]]:
+def execute_run(run: Run) -> tuple[list[Design], float, float | None]:
+    """Run one method on one instance and score its designs; any exception becomes a ``failed`` design.
+
+    Returns the designs, the wall seconds and the process's peak resident memory
+    during the run in MB (None where the platform cannot reset the peak: Linux's
+    ``/proc/self/clear_refs`` is used). The peak includes what the worker process
+    already held (the interpreter and the loaded libraries).
+    """
+    with _measured() as m:
+        try:
+            instance = build_instance(run.instance)
+            designs = _evaluated(instance, get_method(run.method)(instance, **run.params), run.evaluation)
+        except Exception as exc:  # a failing method is a recorded status, never a crashed sweep
+            designs = _failed(run, exc)
+    return designs, m["seconds"], m["peak_mb"]
+
+
+def execute_task(runs: list[Run], plugins=()) -> list[tuple[list[Design], float, float | None]]:
     """Run a group of runs of one method; a batched method designs them in one call.
 
     ``plugins`` are imported first (once per process), so that worker processes
     know the same user methods as the process that planned the runs. Returns
     ``(designs, seconds)`` per run, in order; the seconds of a batched call are
     shared equally. If the batched call fails as a whole, each run is retried
-    alone so that one bad run cannot fail its neighbours.
+    alone so that one bad run cannot fail its neighbours. Each result is
+    ``(designs, seconds, peak_mb)`` as :func:`execute_run` gives it; the runs of a
+    batched call share its peak memory.
     """
     try:
         load_plugins(plugins)
@@ -99,15 +146,17 @@ def execute_task(runs: list[Run], plugins=()) -> list[tuple[list[Design], float]
         ) from None
     if len(runs) == 1 or method.batch is None:
         return [execute_run(run) for run in runs]
-    start = time.perf_counter()
-    try:
-        instances = [build_instance(run.instance) for run in runs]
-        results = method.run_batch([(inst, run.params) for inst, run in zip(instances, runs)])
-        results = [_evaluated(inst, designs, run.evaluation) for inst, designs, run in zip(instances, results, runs)]
-    except Exception:
+    with _measured() as m:
+        try:
+            instances = [build_instance(run.instance) for run in runs]
+            results = method.run_batch([(inst, run.params) for inst, run in zip(instances, runs)])
+            results = [_evaluated(inst, designs, run.evaluation) for inst, designs, run in zip(instances, results, runs)]
+        except Exception:
+            results = None
+    if results is None:
         return [execute_run(run) for run in runs]
-    share = (time.perf_counter() - start) / len(runs)
-    return [(designs, share) for designs in results]
+    share = m["seconds"] / len(runs)
+    return [(designs, share, m["peak_mb"]) for designs in results]
 
 
 def plan_tasks(runs: list[Run]) -> list[list[Run]]:
@@ -316,8 +365,8 @@ def run_experiment(
     bar = tqdm(total=len(pending), desc=f"{spec.name}", unit="run", disable=not progress or not pending)
     owner = uuid.uuid4().hex
 
-    def record(run, designs, seconds):
-        store.add_run(run, designs, experiment=spec.name, seconds=seconds, owner=owner)
+    def record(run, designs, seconds, peak_mb=None):
+        store.add_run(run, designs, experiment=spec.name, seconds=seconds, peak_mb=peak_mb, owner=owner)
         summary.computed += 1
         summary.statuses.update(d.status for d in designs)
         bar.update(1)

@@ -70,7 +70,7 @@ __all__ = [
 ]
 
 #: Report sections an experiment may ask for (``[report] sections``).
-SECTIONS = ("table1", "training_curves")
+SECTIONS = ("table1", "training_curves", "compute")
 
 
 class SpecError(ValueError):

@@ -41,7 +41,8 @@ CREATE TABLE IF NOT EXISTS runs (
     params TEXT NOT NULL,
     version TEXT NOT NULL,
     n_designs INTEGER NOT NULL,
-    seconds REAL NOT NULL
+    seconds REAL NOT NULL,
+    peak_mb REAL
 );
 CREATE TABLE IF NOT EXISTS designs (
     run_key TEXT NOT NULL REFERENCES runs(run_key),
@@ -126,8 +127,16 @@ class Store:
             self._conn.execute("PRAGMA journal_mode=DELETE")
             self._conn.execute("PRAGMA synchronous=FULL")
             self._conn.executescript(_SCHEMA)
+            self._migrate()
         except sqlite3.DatabaseError as exc:
             raise StoreError(f"{self.path} is not a usable result store: {exc}") from None
+
+    def _migrate(self) -> None:
+        """Add the columns newer code writes to a store made by older code (their values stay NULL)."""
+        columns = {row[1] for row in self._conn.execute("PRAGMA table_info(runs)")}
+        if "peak_mb" not in columns:
+            with self._conn:
+                self._conn.execute("ALTER TABLE runs ADD COLUMN peak_mb REAL")
 
     def close(self) -> None:
         self._conn.close()
@@ -191,10 +200,13 @@ class Store:
         with self._conn:
             self._conn.execute("DELETE FROM claims WHERE owner = ?", (owner,))
 
-    def add_run(self, run, designs, *, experiment: str, seconds: float, owner: str | None = None) -> bool:
+    def add_run(self, run, designs, *, experiment: str, seconds: float, peak_mb: float | None = None,
+                owner: str | None = None) -> bool:
         """Store a finished run and its designs atomically; False if it was already stored.
 
-        The run's claim goes in the same transaction; ``owner``'s other claims get a heartbeat.
+        ``seconds`` and ``peak_mb`` are the run's wall time and its process's peak resident
+        memory (None if unknown). The run's claim goes in the same transaction; ``owner``'s
+        other claims get a heartbeat.
         """
         rows = []
         for idx, design in enumerate(designs):
@@ -211,10 +223,12 @@ class Store:
             )
         with self._conn:
             cursor = self._conn.execute(
-                "INSERT OR IGNORE INTO runs VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "INSERT OR IGNORE INTO runs (run_key, experiment, instance, method, label, params, version, "
+                "n_designs, seconds, peak_mb) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (
                     run.key, experiment, json.dumps(run.instance, sort_keys=True), run.method, run.label,
                     json.dumps(run.params, sort_keys=True), run.fingerprint, len(rows), float(seconds),
+                    None if peak_mb is None else float(peak_mb),
                 ),
             )
             if cursor.rowcount == 0:
@@ -276,7 +290,7 @@ class Store:
         query = """
             SELECT d.run_key, d.idx, r.experiment, r.instance, d.method, d.label, d.params, d.cost,
                    d.cost_stderr, d.cost_kind, d.links, d.self_loops, d.info_model, d.status, d.message,
-                   d.seconds, d.controller_kind, d.extras, r.version
+                   d.seconds, d.controller_kind, d.extras, r.version, r.seconds, r.n_designs, r.peak_mb
             FROM designs d JOIN runs r USING (run_key)
             WHERE NOT EXISTS (SELECT 1 FROM members) OR d.run_key IN (SELECT run_key FROM members)
             ORDER BY r.instance, d.label, d.run_key, d.idx
@@ -284,7 +298,7 @@ class Store:
         cols = [
             "run_key", "idx", "experiment", "instance", "method", "label", "params", "cost", "cost_stderr",
             "cost_kind", "links", "self_loops", "info_model", "status", "message", "seconds",
-            "controller_kind", "extras", "fingerprint",
+            "controller_kind", "extras", "fingerprint", "run_seconds", "run_designs", "run_peak_mb",
         ]
         rows = []
         for row in self._conn.execute(query):

@@ -1,4 +1,5 @@
 import sqlite3
+import sys
 
 import numpy as np
 import pytest
@@ -38,6 +39,25 @@ def test_run_store_and_resume(tmp_path):
         controller = store.controller(lqr[0].run_key)
         assert controller.K.shape == (8, 8)
         assert "spec:s" in store.meta()
+        # every run records its wall time and its process's peak resident memory (Linux)
+        assert all(r.run_seconds > 0 and r.run_designs == 1 for r in records)
+        if sys.platform.startswith("linux"):
+            assert all(50 < r.run_peak_mb < 1e5 for r in records)
+
+
+def test_a_store_from_before_peak_memory_gains_the_column_and_keeps_its_runs(tmp_path):
+    path = tmp_path / "old.sqlite"
+    spec = parse_spec(SPEC)
+    with Store(path) as store:
+        run_experiment(spec, store, progress=False)
+    con = sqlite3.connect(path)
+    with con:  # the runs table as stores had it before peak_mb (SQLite >= 3.35 drops columns)
+        con.execute("ALTER TABLE runs DROP COLUMN peak_mb")
+    con.close()
+    with Store(path) as store:
+        records = store.records()
+        assert len(records) == 9 and all(r.run_peak_mb is None for r in records)
+        assert run_experiment(spec, store, progress=False).computed == 0
 
 
 def test_a_new_label_renames_stored_runs_without_recomputing(tmp_path):

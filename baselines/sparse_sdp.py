@@ -45,13 +45,14 @@ blocks:
   iteration costs a factorization solve it caches and one eigendecomposition of
   the 2n × 2n LMI block, so a solve is 24-34x faster than Clarabel's at
   N = 50 (1.4-2.5 s per γ against 39-63 s in one benchmark run) and still runs at
-  N = 100 (about 100 s per γ).
+  N = 100 (10-130 s per γ; a 10-γ path 569 s with screening, below).
   Tolerance ``eps`` (absolute and relative), SCS's ``scale`` = 10 (measured:
   about half the iterations of its default 0.1 on the paper family), and each γ
   started from the previous γ's solution (the path runs in increasing γ): from a
   cold start the diagonal end of the path at N = 100 needs over 20,000 iterations
   per γ (3 of 10 points stopped at the limit, 1002 s for the path); warm, one
-  (994 s). A design can then differ from a lone solve at its γ only in entries
+  (994-1097 s). Screening (the ``screen`` hyperparameter) then skips the γ beyond
+  the first diagonal solution, which convexity answers: 569 s. A design can then differ from a lone solve at its γ only in entries
   within SCS's tolerance of the threshold. On node blocks it is no faster and lands elsewhere: on the
   20-mass chain (γ = 1e-3, 1e-2, 3e-2) 114 s against Clarabel's 56, with 114, 74
   and 72 links where Clarabel finds 134, 94 and 86 (one solve at its iteration
@@ -93,8 +94,8 @@ SDP_SOLVERS = ("scs", "clarabel")
 #: Largest plant (states) the path solves by default, per solver. Clarabel, measured on
 #: 2 cores: ~40 s per γ at 50 states (paper family, N = 50) and ~30 s at 40 (mass-spring
 #: chain, N = 20), but more than 22 minutes for one γ at 100 (chain, N = 50): a 10-γ path
-#: there would run for hours. SCS: about 100 s per γ at 100 states (paper family, N = 100; the
-#: 10-γ path 994 s), and each iteration's eigendecomposition grows like n³, with more
+#: there would run for hours. SCS: 10-130 s per γ at 100 states (paper family, N = 100; the
+#: 10-γ path 569 s with screening), and each iteration's eigendecomposition grows like n³, with more
 #: iterations as n grows.
 SDP_MAX_STATES = {"scs": 128, "clarabel": 64}
 
@@ -104,7 +105,7 @@ _DEFAULT_MAX_ITER = {"scs": 20000, "clarabel": 200}
 
 #: What the size guard's message says per solver (from the measurements above).
 _SIZE_GUARD_REASON = {
-    "scs": "a 10-gamma path takes about 17 minutes at 100 states with SCS, and far longer beyond 128",
+    "scs": "a 10-gamma path takes about 10 minutes at 100 states with SCS, and far longer beyond 128",
     "clarabel": "its 2n x 2n LMI takes over 20 minutes per gamma at 100 states with Clarabel",
 }
 

@@ -8,6 +8,7 @@ store are skipped, so an interrupted sweep resumes where it stopped.
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import os
 import time
@@ -160,15 +161,21 @@ def execute_task(runs: list[Run], plugins=()) -> list[tuple[list[Design], float,
 
 
 def plan_tasks(runs: list[Run]) -> list[list[Run]]:
-    """Group runs into tasks: batched methods get up to ``batch_size`` runs per task."""
+    """Group runs into tasks: batched methods get up to ``batch_size`` runs per task.
+
+    A task holds runs on instances of one family and size only: a batch's seconds are
+    shared equally among its runs, so mixing sizes would blur the time per design at
+    each N that the report's compute section draws.
+    """
     tasks, groups = [], {}
     for run in runs:
         method = get_method(run.method)
         if method.batch is None:
             tasks.append([run])
         else:
-            groups.setdefault(run.method, []).append(run)
-    for name, group in groups.items():
+            size_key = (run.instance.get("family"), run.instance.get("n"))
+            groups.setdefault((run.method, json.dumps(size_key)), []).append(run)
+    for (name, _), group in groups.items():
         size = get_method(name).batch_size
         tasks += [group[i:i + size] for i in range(0, len(group), size)]
     # Largest tasks first keeps workers busy to the end.

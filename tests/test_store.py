@@ -137,3 +137,11 @@ def test_batched_methods_get_grouped_runs_and_store_per_run(tmp_path, monkeypatc
         run_experiment(parse_spec(SPEC.replace("seeds = 3", "seeds = 6")), store, progress=False)
         plain = sorted(r.cost for r in store.records() if r.method == "decentralized")
     assert batched == plain and len(plain) == 6
+    # A batch holds one instance size: its seconds are shared among its runs, and the compute
+    # section times each size on its own.
+    calls.clear()
+    sizes = parse_spec(SPEC.replace('method = "decentralized"', 'method = "decentralized_batched"')
+                       .replace("n = [8]", "n = [6, 8]"))
+    with Store(tmp_path / "n.sqlite") as store:
+        run_experiment(sizes, store, progress=False)
+    assert sorted(calls) == [3, 3]

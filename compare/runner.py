@@ -44,7 +44,10 @@ __all__ = [
     "instance_facts",
 ]
 
-_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
+# RAYON_NUM_THREADS: Clarabel's faer factorization runs on a rayon pool that otherwise takes every
+# core (seen: SLS at N = 100 kept a second thread busy, so two workers ran three threads on 2 cores).
+_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS",
+                "RAYON_NUM_THREADS")
 
 
 def build_instance(instance_spec: dict):

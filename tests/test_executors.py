@@ -44,3 +44,22 @@ def test_unknown_executor_is_a_clear_error(tmp_path):
     with pytest.raises(ExecutorError, match="unknown executor 'spark'"):
         with open_executor("spark", 2):
             pass
+
+
+def _thread_settings():
+    import os
+
+    return {var: os.environ.get(var) for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                                                 "RAYON_NUM_THREADS")}
+
+
+def test_local_workers_are_single_threaded_for_every_thread_pool():
+    """BLAS, OpenMP, MKL and rayon (Clarabel's faer) pools: one thread each, so N workers use N cores."""
+    from compare.runner import make_executor
+
+    pool = make_executor(1)
+    try:
+        settings = pool.submit(_thread_settings).result(timeout=120)
+    finally:
+        pool.shutdown()
+    assert settings == {var: "1" for var in settings}

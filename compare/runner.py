@@ -185,9 +185,25 @@ def plan_tasks(runs: list[Run]) -> list[list[Run]]:
     return sorted(tasks, key=len, reverse=True)
 
 
+_LIMITS = []  # the worker's threadpoolctl limits, kept for the process's lifetime
+
+
 def _limit_threads() -> None:
+    """Make this (worker) process single-threaded in every thread pool.
+
+    Runs as the pool's initializer, after unpickling it imported this module and with
+    it numpy: OpenBLAS has already started its threads by then, so the environment
+    variables alone come too late for it (measured: two workers each ran 2-thread
+    OpenBLAS on 2 cores, and numpy-bound methods at N = 100 took 3-20x their
+    single-process time). threadpoolctl caps the pools already loaded; the variables
+    cover those loaded later (MKL in SCS, rayon in Clarabel, OpenMP), and torch is
+    set directly.
+    """
     for var in _THREAD_VARS:
         os.environ[var] = "1"
+    from threadpoolctl import threadpool_limits
+
+    _LIMITS.append(threadpool_limits(limits=1))
     try:
         import torch
 
@@ -197,23 +213,14 @@ def _limit_threads() -> None:
 
 
 def make_executor(workers: int) -> Executor:
-    """A process pool of ``workers`` single-threaded workers (spawned, not forked)."""
-    # Children inherit the environment at spawn time, before numpy loads BLAS.
-    saved = {var: os.environ.get(var) for var in _THREAD_VARS}
-    for var in _THREAD_VARS:
-        os.environ[var] = "1"
-    try:
-        return ProcessPoolExecutor(
-            max_workers=workers,
-            mp_context=multiprocessing.get_context("spawn"),
-            initializer=_limit_threads,
-        )
-    finally:
-        for var, value in saved.items():
-            if value is None:
-                os.environ.pop(var, None)
-            else:
-                os.environ[var] = value
+    """A process pool of ``workers`` single-threaded workers (spawned, not forked; see :func:`_limit_threads`)."""
+    # The pool starts its processes when work is submitted, so the limits are set in each
+    # worker by the initializer rather than through this process's environment.
+    return ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_limit_threads,
+    )
 
 
 class ExecutorError(ValueError):
@@ -258,6 +265,7 @@ def open_executor(address: str, workers: int):
             except (OSError, TimeoutError) as exc:
                 raise ExecutorError(f"cannot reach the dask scheduler at {target}: {exc}") from None
         try:
+            client.run(_limit_threads)  # dask's nanny covers BLAS and OpenMP, not rayon
             yield client.get_executor(pure=False)
         finally:
             client.close()

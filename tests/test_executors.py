@@ -49,17 +49,30 @@ def test_unknown_executor_is_a_clear_error(tmp_path):
 def _thread_settings():
     import os
 
-    return {var: os.environ.get(var) for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                                                 "RAYON_NUM_THREADS")}
+    from threadpoolctl import threadpool_info
+
+    env = {var: os.environ.get(var) for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                                                "RAYON_NUM_THREADS")}
+    import numpy as np
+
+    np.linalg.eigh(np.eye(300) + 1.0)  # BLAS in use, as in a run
+    return env, {(pool["internal_api"], pool["num_threads"]) for pool in threadpool_info()}
 
 
-def test_local_workers_are_single_threaded_for_every_thread_pool():
-    """BLAS, OpenMP, MKL and rayon (Clarabel's faer) pools: one thread each, so N workers use N cores."""
-    from compare.runner import make_executor
+def test_local_workers_are_single_threaded_for_every_thread_pool(monkeypatch):
+    """BLAS, OpenMP, MKL and rayon (Clarabel's faer) pools: one thread each, so N workers use N cores.
 
+    The BLAS pools are checked as loaded, not through the environment: numpy loads before the
+    pool's initializer runs, and OpenBLAS ignores variables set after it started.
+    """
+    from compare.runner import _THREAD_VARS, make_executor
+
+    for var in _THREAD_VARS:  # as in a user's shell (conftest sets them for the test process)
+        monkeypatch.delenv(var, raising=False)
     pool = make_executor(1)
     try:
-        settings = pool.submit(_thread_settings).result(timeout=120)
+        env, pools = pool.submit(_thread_settings).result(timeout=120)
     finally:
         pool.shutdown()
-    assert settings == {var: "1" for var in settings}
+    assert env == {var: "1" for var in env}
+    assert pools and all(threads == 1 for _, threads in pools), pools

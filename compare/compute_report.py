@@ -111,8 +111,9 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None):
 
     labels = sorted({c.label for c in cells})
     styles = styles or label_styles(labels)
-    if axes is None:
-        fig, axes = plt.subplots(1, 2, figsize=(13, 5.2), constrained_layout=True)
+    own_figure = axes is None
+    if own_figure:
+        fig, axes = plt.subplots(1, 2, figsize=(13, 6.2), constrained_layout=True)
     else:
         fig = axes[0].figure
     time_ax, memory_ax = axes
@@ -135,6 +136,8 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None):
         if measured:
             memory_ax.plot([c.n for c in measured], [c.peak_mb for c in measured], color=colour, marker=marker,
                            label=label)
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
     for ax in axes:
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -147,7 +150,15 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None):
     time_ax.set_title("Time per design (fitted growth in the legend)")
     memory_ax.set_ylabel("peak resident memory of the worker (MB)")
     memory_ax.set_title("Peak memory per run (largest over runs)")
-    time_ax.legend(fontsize=7, loc="upper left")
+    # Memory spans less than a decade or two: label 1-2-5 steps in plain MB, not one power of ten.
+    memory_ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    memory_ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    memory_ax.yaxis.set_minor_formatter(NullFormatter())
+    if own_figure:  # one legend for both panels, below them, so that no entry covers a line
+        handles, names = time_ax.get_legend_handles_labels()
+        fig.legend(handles, names, loc="outside lower center", ncol=3, fontsize=8, frameon=False)
+    else:
+        time_ax.legend(fontsize=7)
     return fig, axes
 
 
@@ -212,7 +223,8 @@ def compute_section(records: Records, out, files: dict, styles: dict, save) -> l
         "shown). Only runs with at least one usable design and none refused by a size guard count; an open "
         "marker is a size where no run counted (see the table). Right: the largest peak resident memory of the "
         "worker process during a run, which includes the interpreter and the loaded libraries (about 300 MB "
-        "once torch is loaded).",
+        "once torch is loaded) but not memory that earlier runs in the same worker freed (it is handed back "
+        "to the system before each run).",
         "",
         compute_markdown(cells),
         "",

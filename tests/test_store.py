@@ -45,6 +45,25 @@ def test_run_store_and_resume(tmp_path):
             assert all(50 < r.run_peak_mb < 1e5 for r in records)
 
 
+_FREED_THEN_MEASURED = """
+from compare import runner
+blocks = [bytearray(100_000) for _ in range(5000)]  # 500 MB in blocks malloc keeps on its heap
+del blocks[:-1]  # the last one stays, so the heap cannot simply shrink from its end
+with runner._measured() as watch:
+    pass
+print(watch["peak_mb"])
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="peak memory is measured on Linux")
+def test_a_runs_peak_memory_does_not_count_what_earlier_runs_freed():
+    """A worker keeps freed memory in malloc's lists; the next run's peak must not include it."""
+    import subprocess
+
+    out = subprocess.run([sys.executable, "-c", _FREED_THEN_MEASURED], capture_output=True, text=True, check=True)
+    assert float(out.stdout) < 300, out.stdout  # the interpreter and numpy, not the 500 MB freed
+
+
 def test_a_store_from_before_peak_memory_gains_the_column_and_keeps_its_runs(tmp_path):
     path = tmp_path / "old.sqlite"
     spec = parse_spec(SPEC)

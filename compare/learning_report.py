@@ -220,7 +220,7 @@ def _variant_pairs(records, a_norms) -> str:
                     continue
                 note = "interval contains 0" if p.inconclusive else ""
                 lines.append(f"| {p.a} − {p.b} | {a:g} | {p.instances} | {p.a_wins} | {p.b_wins} | "
-                             f"{p.median:+.4f} | [{p.low:+.4f}, {p.high:+.4f}] | {note} |")
+                             f"{p.median:+.4f} | {p.interval_text} | {note} |")
     return "\n".join(lines) + "\n"
 
 

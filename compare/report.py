@@ -340,10 +340,9 @@ def _paired_table(comparisons: dict, title: str) -> list[str]:
                   " note |", "|---|---|---:|---:|---:|---:|---|---|"]
         for r in rows:
             budget = "any" if r.budget is None else f"≤ {r.budget:g}"
-            interval = f"[{r.low:+.4f}, {r.high:+.4f}]" + ("" if r.coverage >= 0.95 else f" ({r.coverage:.0%})")
             note = "interval contains 0" if r.inconclusive else ""
             lines.append(f"| {r.a} − {r.b} | {budget} | {r.instances} | {r.a_wins} | {r.b_wins} | "
-                         f"{r.median:+.4f} | {interval} | {note} |")
+                         f"{r.median:+.4f} | {r.interval_text} | {note} |")
         lines.append("")
     return lines
 
@@ -449,6 +448,10 @@ def _delayed_section(records, out: Path, files: dict, styles: dict, boundaries: 
             pair = paired_difference(best, runner, tables[(panel, best)][:, k], tables[(panel, runner)][:, k])
             if pair.inconclusive:
                 verdict = "interval contains 0: not distinguishable"
+            elif pair.too_few:
+                # With 5 instances or fewer no interval reaches 95 %: report the wins, claim nothing more.
+                verdict = (f"{best if pair.high < 0 else runner} better on every common instance; too few "
+                           f"instances for a 95 % interval (the range covers the median with {pair.coverage:.0%})")
             elif pair.high < 0:
                 verdict = f"{best} significantly better"
             else:
@@ -457,7 +460,7 @@ def _delayed_section(records, out: Path, files: dict, styles: dict, boundaries: 
                 verdict = (f"{runner} significantly better on the {pair.instances} common instances; the "
                            "medians rank them otherwise because the two ran on different instances")
             parts.append(f"at ≤ {budget} links {best} ({_fmt(best_cost)}) against {runner} ({_fmt(runner_cost)}): "
-                         f"median paired difference {pair.median:+.4f} [{pair.low:+.4f}, {pair.high:+.4f}], "
+                         f"median paired difference {pair.median:+.4f} {pair.interval_text}, "
                          f"better on {pair.a_wins} of {pair.instances} instances ({verdict})")
         bound = f" The SLS bound's median is {_fmt(bounds[panel][0])}." if panel in bounds else ""
         sentences.append(f"- {panel_title(panel)}: " + "; ".join(parts) + "." + bound)

@@ -139,11 +139,23 @@ class Paired:
     low: float
     high: float
     coverage: float
+    confidence: float = 0.95
 
     @property
     def inconclusive(self) -> bool:
         """The interval contains 0: the data do not say which is better."""
         return not (self.high < 0 or self.low > 0)
+
+    @property
+    def too_few(self) -> bool:
+        """Too few instances for an interval of the asked confidence (with 5 or fewer, even the full range covers less than 95 %)."""
+        return self.coverage < self.confidence
+
+    @property
+    def interval_text(self) -> str:
+        """``[low, high]``, followed by the achieved coverage where it falls short of the asked confidence."""
+        text = f"[{self.low:+.4f}, {self.high:+.4f}]"
+        return text + (f" ({self.coverage:.0%})" if self.too_few else "")
 
 
 def paired_difference(a_label, b_label, a_costs, b_costs, budget=None, confidence: float = 0.95) -> Paired:
@@ -153,7 +165,7 @@ def paired_difference(a_label, b_label, a_costs, b_costs, budget=None, confidenc
     d = a_costs[both] - b_costs[both]
     low, high, coverage = median_interval(d, confidence)
     return Paired(a_label, b_label, budget, int(both.sum()), int((d < 0).sum()), int((d > 0).sum()),
-                  float(np.median(d)) if d.size else float("nan"), low, high, coverage)
+                  float(np.median(d)) if d.size else float("nan"), low, high, coverage, confidence)
 
 
 def paired_comparisons(records, reference: str, budgets=(20, 60, 140, None), others=None) -> dict:

@@ -189,10 +189,24 @@ def test_delayed_section_says_when_the_paired_result_reverses_the_median_ranking
 
     insts = [dict(INST[0], seed=s) for s in range(8)]
     records = [_rec(inst, "A", 10, 1.0 if s < 4 else 1.2, info="delayed") for s, inst in enumerate(insts)]
-    # B ran on instances 3..7 only and beats A on each of them by 0.01.
+    # B ran on instances 2..7 only and beats A on each of them by 0.01.
     records += [_rec(inst, "B", 10, (1.0 if s < 4 else 1.2) - 0.01, info="delayed")
-                for s, inst in enumerate(insts) if s >= 3]
+                for s, inst in enumerate(insts) if s >= 2]
     lines = _delayed_section(records, tmp_path, {}, label_styles(["A", "B"]), {})
     text = "\n".join(lines)
     assert "at ≤ 20 links A (1.1) against B (1.19)" in text
-    assert "B significantly better on the 5 common instances" in text
+    assert "B significantly better on the 6 common instances" in text
+
+
+def test_delayed_section_claims_no_significance_from_three_instances(tmp_path):
+    """Three paired instances that all favour A: their range covers the median with 75 %, not 95 %."""
+    from compare.figures import label_styles
+    from compare.report import _delayed_section
+
+    insts = [dict(INST[0], seed=s) for s in range(3)]
+    records = [_rec(inst, "A", 10, 1.0 + 0.1 * s, info="delayed") for s, inst in enumerate(insts)]
+    records += [_rec(inst, "B", 10, 1.05 + 0.1 * s, info="delayed") for s, inst in enumerate(insts)]
+    text = "\n".join(_delayed_section(records, tmp_path, {}, label_styles(["A", "B"]), {}))
+    assert "significantly" not in text
+    assert "[-0.0500, -0.0500] (75%)" in text
+    assert "A better on every common instance; too few instances for a 95 % interval" in text

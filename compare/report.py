@@ -316,8 +316,8 @@ def _budget_tables(records: Records, budgets=(20, 60, 140, None)) -> list[str]:
     heads = [f"≤ {b} links" if b is not None else "any" for b in budgets]
     lines = []
     for panel in sorted({key[0] for key in table}):
-        lines += [f"### {panel_title(panel)}", "", "Median over instances of the best cost within the budget "
-                  "(∞ where fewer than half the instances have a design within it), and in parentheses the "
+        lines += [f"### {panel_title(panel)}", "", "Median over the instances a method ran on of the best cost within "
+                  "the budget (∞ where fewer than half of them have a design within it), and in parentheses the "
                   "instances with one.", "", "| method | " + " | ".join(heads) + " |",
                   "|---|" + "---:|" * len(budgets)]
         for (pnl, label), cells in table.items():
@@ -686,9 +686,9 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
             "",
             "For a budget of L links, each method's best cost on an instance is the lowest cost among its "
             "designs there with at most L directed off-diagonal links. The curve is the median of that over "
-            "instances and the band its 25–75 % range, as a step function of L: read it off at any budget. "
-            "A marker shows where a curve starts (the smallest budget at which at least half the instances "
-            "have a design); line styles give the information model.",
+            "the instances the method ran on and the band its 25–75 % range, as a step function of L: read it "
+            "off at any budget. A marker shows where a curve starts (the smallest budget at which at least half "
+            "of those instances have a design); line styles give the information model.",
             "",
         ]
         lines += _budget_tables(records)

@@ -40,7 +40,12 @@ def instances_by_panel(records) -> dict[tuple, list[str]]:
 
 
 def _quantiles(values) -> np.ndarray:
-    """25th, 50th, 75th percentiles along axis 0 of values that may be inf."""
+    """25th, 50th, 75th percentiles along axis 0 of values that may be inf; rows of NaN (not run) are left out."""
+    values = np.asarray(values, dtype=float)
+    if values.ndim == 2:
+        values = values[~np.isnan(values).all(axis=1)]
+        if not len(values):
+            return np.full((3, values.shape[1]), np.inf)
     finite = np.where(np.isfinite(values), values, _SENTINEL)
     q = np.percentile(finite, [25, 50, 75], axis=0)
     return np.where(q >= _SENTINEL / 10, np.inf, q)
@@ -50,10 +55,10 @@ def _quantiles(values) -> np.ndarray:
 class Front:
     """A method's budget front on one panel: step function of the link budget.
 
-    ``cost[:, k]`` holds the (25 %, median, 75 %) over ``instances`` instances of
-    the best cost within ``budgets[k]`` links; it holds from ``budgets[k]`` up to
-    the next budget. ``inf`` where fewer than that share of instances has a
-    design within the budget.
+    ``cost[:, k]`` holds the (25 %, median, 75 %) over the ``instances`` instances
+    the method ran on of the best cost within ``budgets[k]`` links; it holds from
+    ``budgets[k]`` up to the next budget. ``inf`` where fewer than that share of
+    those instances has a design within the budget.
     """
 
     panel: tuple
@@ -72,11 +77,20 @@ class Front:
 
 
 def best_within(records, panel_instances: list[str], budgets) -> np.ndarray:
-    """Best cost per (instance, budget) of one method's records: shape (instances, budgets)."""
+    """Best cost per (instance, budget) of one method's records: shape (instances, budgets).
+
+    ``inf`` where the method ran on the instance but no design fits the budget (or
+    none is usable); ``NaN`` on the whole row of an instance it did not run on (a
+    spec's ``where`` can restrict a costly method to some instances), so that
+    medians are taken over the instances it ran on.
+    """
     index = {inst: i for i, inst in enumerate(panel_instances)}
     budgets = np.asarray(budgets, dtype=float)
-    best = np.full((len(panel_instances), budgets.size), np.inf)
-    for r in as_records(records):
+    best = np.full((len(panel_instances), budgets.size), np.nan)
+    records = as_records(records)
+    for key in records.by_instance:
+        best[index[key]] = np.inf
+    for r in records:
         if r.ok:
             i = index[r.instance.key]
             fits = budgets >= r.links
@@ -101,7 +115,7 @@ def budget_fronts(records) -> list[Front]:
         budgets = np.unique([0.0] + [float(r.links) for r in rs if r.ok])
         best = best_within(rs, panels[panel], budgets)
         info = Counter(r.info_model for r in rs).most_common(1)[0][0]
-        fronts.append(Front(panel, label, info, budgets, _quantiles(best), len(panels[panel])))
+        fronts.append(Front(panel, label, info, budgets, _quantiles(best), len(rs.by_instance)))
     return fronts
 
 

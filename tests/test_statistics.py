@@ -29,12 +29,25 @@ def test_front_is_the_median_over_instances_of_the_best_cost_within_each_budget(
 
 def test_an_instance_without_a_design_within_the_budget_counts_as_not_reached():
     records = [_rec(INST[0], "m", 10, 1.0), _rec(INST[1], "m", 50, 1.0), _rec(INST[2], "m", 50, 1.0),
-               _rec(INST[3], "other", 0, 2.0)]
+               _rec(INST[3], "m", 0, float("nan"), status="failed"), _rec(INST[3], "other", 0, 2.0)]
     front = next(f for f in budget_fronts(records) if f.label == "m")
-    assert front.instances == 4
+    assert front.instances == 4  # it ran on all four, and failed on one
     assert front.at(10)[1] == np.inf  # 1 of 4 instances: the median is not reached
     # 3 of 4 have one: the median is reached, the 75 % quantile lies between 1 and the missing one.
     assert front.at(50) == (1.0, 1.0, np.inf)
+
+
+def test_a_method_run_on_some_instances_of_a_panel_is_summarized_over_those():
+    """A spec's ``where`` can run a costly method on one instance of a panel: its median is that instance's."""
+    records = [_rec(inst, "cheap", 0, 2.0 + i) for i, inst in enumerate(INST)]
+    records += [_rec(INST[0], "costly", 10, 1.5), _rec(INST[0], "costly", 30, 1.2)]
+    front = next(f for f in budget_fronts(records) if f.label == "costly")
+    assert front.instances == 1
+    assert front.at(10) == (1.5, 1.5, 1.5) and front.at(30) == (1.2, 1.2, 1.2)
+    # paired statistics use the common instances only
+    (pair,) = [p for p in paired_comparisons(records, "costly")[next(iter(paired_comparisons(records, "costly")))]
+               if p.budget is None]
+    assert (pair.instances, pair.a_wins) == (1, 1)
 
 
 def test_median_interval_has_the_binomial_coverage_and_contains_the_median():

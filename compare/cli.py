@@ -24,8 +24,9 @@ PRESET_TIMES = {
     "sls-small": "~1 min (estimated from its size, not measured)",
     "table1-small": "~1-2 min (estimated from table1's per-run times, not measured)",
     "table1": "~33 min (1964 s measured)",
-    "tradeoff": "~86 min (5116 s measured)",
+    "tradeoff": "~30 min (1810 s measured)",
     "systems": "~6 min (374 s measured)",
+    "scale": "~19 min (1139 s measured)",
 }
 
 

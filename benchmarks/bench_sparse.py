@@ -9,7 +9,7 @@ interior-point reference the toolkit used before): its whole path at N = 20, the
 states; over 20 minutes per γ at 100). Where both solved a γ the script says whether the patterns agree.
 Run from the repository root::
 
-    OMP_NUM_THREADS=1 python benchmarks/bench_sparse.py              # N = 20, 50, 100 (~15 min)
+    OMP_NUM_THREADS=1 python benchmarks/bench_sparse.py              # N = 20, 50, 100 (~9 min)
     OMP_NUM_THREADS=1 python benchmarks/bench_sparse.py --sizes 20   # just N = 20
 """
 

@@ -19,13 +19,13 @@ __all__ = ["main"]
 #: Approximate wall time of ``compare run PRESET`` on 2 cores (2 workers), report included.
 #: A preset missing here is listed as "not measured".
 PRESET_TIMES = {
-    "quick": "~3-4 min (172-242 s measured)",
+    "quick": "~1 min (65 s measured)",
     "baselines-small": "~1 min (estimated from its size, not measured)",
     "sls-small": "~1 min (estimated from its size, not measured)",
     "table1-small": "~1-2 min (estimated from table1's per-run times, not measured)",
-    "table1": "~33 min (1964 s measured)",
+    "table1": "~10 min (608 s measured)",
     "tradeoff": "~30 min (1810 s measured)",
-    "systems": "~6 min (374 s measured)",
+    "systems": "~3 min (173 s measured)",
     "scale": "~19 min (1139 s measured)",
 }
 

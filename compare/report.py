@@ -240,17 +240,13 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
             cost_axis(ax, low, max(p.cost[2] for p in usable) * 1.03)
         else:
             cost_axis(ax, low, top)
-            for p in usable:
-                if p.cost[1] > top:
-                    ax.plot(p.links[1], top, marker="^", color=styles[p.label][0], markersize=8, clip_on=False,
-                            linestyle="none", zorder=5)
-                    ax.annotate(f"{p.cost[1]:.3g}", (p.links[1], top), xytext=(0, -4), textcoords="offset points",
-                                ha="center", va="top", fontsize=7, color=styles[p.label][0])
         ax.set_xscale("symlog", linthresh=1.0)
         ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
         # Explicit: autoscaling ignores the dodged markers (drawn with an offset transform),
         # which left methods sharing a link count outside the axes.
         ax.set_xlim(-0.4, max(p.links[2] for p in usable) * 1.15 + 1)
+        if top is not None:
+            _mark_off_scale(ax, [p for p in usable if p.cost[1] > top], top, styles)
         ax.set_xlabel("directed off-diagonal links (median, IQR bars)")
         ax.set_ylabel("normalized cost E[J] / tr(P) (median, IQR bars)")
         ax.set_title(panel_title(panel))
@@ -306,6 +302,26 @@ def _summary_tables(points: list[Point]) -> list[str]:
             )
         lines.append("")
     return lines
+
+
+def _mark_off_scale(ax, points, top: float, styles: dict) -> None:
+    """A triangle on the top edge and the median cost below it for each point above the axis.
+
+    Labels closer than about 30 points to the previous one in a row go one row lower, so
+    that values at neighbouring link counts stay readable.
+    """
+    labels: dict[tuple, list[str]] = {}  # (links, text) -> colours: methods sharing a value get one label
+    for p in sorted(points, key=lambda p: p.links[1]):
+        colour = styles[p.label][0]
+        ax.plot(p.links[1], top, marker="^", color=colour, markersize=8, clip_on=False, linestyle="none", zorder=5)
+        labels.setdefault((p.links[1], f"{p.cost[1]:.3g}"), []).append(colour)
+    rows: list[float] = []  # the display x of the last label in each row
+    for (links, text), colours in labels.items():
+        x = ax.transData.transform((links, top))[0] * 72.0 / ax.figure.dpi
+        row = next((i for i, last in enumerate(rows) if x - last >= 30.0), len(rows))
+        rows[row:row + 1] = [x]
+        ax.annotate(text, (links, top), xytext=(0, -4 - 9 * row), textcoords="offset points", ha="center",
+                    va="top", fontsize=7, color=colours[0] if len(set(colours)) == 1 else "0.25")
 
 
 def _budget_tables(records: Records, budgets=(20, 60, 140, None)) -> list[str]:
@@ -451,7 +467,7 @@ def _delayed_section(records, out: Path, files: dict, styles: dict, boundaries: 
             elif pair.too_few:
                 # With 5 instances or fewer no interval reaches 95 %: report the wins, claim nothing more.
                 verdict = (f"{best if pair.high < 0 else runner} better on every common instance; too few "
-                           f"instances for a 95 % interval (the range covers the median with {pair.coverage:.0%})")
+                           "instances for a 95 % interval")
             elif pair.high < 0:
                 verdict = f"{best} significantly better"
             else:

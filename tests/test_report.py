@@ -210,3 +210,33 @@ def test_delayed_section_claims_no_significance_from_three_instances(tmp_path):
     assert "significantly" not in text
     assert "[-0.0500, -0.0500] (75%)" in text
     assert "A better on every common instance; too few instances for a 95 % interval" in text
+
+
+def test_off_scale_values_get_one_label_per_value_and_neighbours_go_a_row_lower():
+    """Costs above the axis: methods sharing a link count and value share a label; close labels do not overlap."""
+    from types import SimpleNamespace
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from compare.report import _mark_off_scale
+
+    fig, ax = plt.subplots(figsize=(4, 3))
+    ax.set_xscale("symlog", linthresh=1.0)
+    ax.set_xlim(-0.4, 400)
+    ax.set_ylim(0.9, 2.0)
+
+    def point(label, links, cost):
+        return SimpleNamespace(label=label, links=(links, links, links), cost=(cost, cost, cost))
+
+    styles = {name: (colour, "o") for name, colour in (("a", "red"), ("b", "blue"), ("c", "green"))}
+    _mark_off_scale(ax, [point("a", 0, 2.3), point("b", 0, 2.3), point("c", 0, 1e26), point("a", 300, 5.0)],
+                    2.0, styles)
+    texts = {t.get_text(): t for t in ax.texts}
+    assert sorted(texts) == ["1e+26", "2.3", "5"]
+    assert texts["2.3"].get_color() == "0.25"  # shared by two methods
+    assert texts["1e+26"].xyann[1] != texts["2.3"].xyann[1]  # same link count: stacked, not overlapping
+    assert texts["5"].xyann[1] == -4  # far from the others: first row
+    plt.close(fig)

@@ -108,6 +108,7 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None):
     fig, axes
     """
     from .figures import label_styles, plt
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     labels = sorted({c.label for c in cells})
     styles = styles or label_styles(labels)
@@ -136,8 +137,6 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None):
         if measured:
             memory_ax.plot([c.n for c in measured], [c.peak_mb for c in measured], color=colour, marker=marker,
                            label=label)
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
-
     for ax in axes:
         ax.set_xscale("log")
         ax.set_yscale("log")

@@ -17,6 +17,7 @@ from collections import Counter
 from concurrent.futures import FIRST_COMPLETED, Executor, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 from tqdm.auto import tqdm
 
@@ -76,18 +77,26 @@ _STATUS_FILE = "/proc/self/status"
 _CLEAR_REFS = "/proc/self/clear_refs"
 
 
+@lru_cache(maxsize=1)
+def _malloc_trim():
+    """glibc's ``malloc_trim``, or None where there is none (the peak then includes freed memory still held)."""
+    try:
+        import ctypes
+
+        return ctypes.CDLL("libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return None
+
+
 def _release_freed_memory() -> None:
     """Hand memory that earlier runs freed back to the system (glibc), so that it is not counted again.
 
     Without it a worker that had run SLS at N = 100 (4.6 GB) kept about 1.2 GB in malloc's
     free lists, and every later run in it reported that as its peak (LQR: 1200 MB).
     """
-    try:
-        import ctypes
-
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):  # not glibc: the peak then includes freed memory still held
-        pass
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)
 
 
 def _reset_peak_memory() -> bool:

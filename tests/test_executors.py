@@ -49,11 +49,12 @@ def test_unknown_executor_is_a_clear_error(tmp_path):
 def _thread_settings():
     import os
 
+    import numpy as np
     from threadpoolctl import threadpool_info
 
-    env = {var: os.environ.get(var) for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                                                "RAYON_NUM_THREADS")}
-    import numpy as np
+    from compare.runner import _THREAD_VARS
+
+    env = {var: os.environ.get(var) for var in _THREAD_VARS}
 
     np.linalg.eigh(np.eye(300) + 1.0)  # BLAS in use, as in a run
     return env, {(pool["internal_api"], pool["num_threads"]) for pool in threadpool_info()}

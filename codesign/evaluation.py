@@ -15,14 +15,19 @@ to linear near the origin, so J(x0) is nearly a quadratic form and the residual
 variance is a small fraction of the plain one (about 50x smaller in standard
 error on paper instances). Coefficients are cross-fitted (each fold's residuals
 use coefficients fitted on the other folds), which keeps the estimator exactly
-unbiased; the plain sample mean is reported beside it.
+unbiased; the plain sample mean is reported beside it. A cost too heavy-tailed
+for the target precision on the validation draws is refined on importance-sampled
+draws (:func:`simulate_to_precision`; the estimators are in
+:mod:`codesign.estimators`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+
+from .estimators import MIN_CV_DRAWS, TiltedProposal, control_variate_estimate, fitted_cost_form, importance_estimate
 
 __all__ = [
     "static_gain_cost",
@@ -42,18 +47,15 @@ __all__ = [
 VALIDATION_SIZE = 2000
 #: Relative standard error a simulated cost aims for (:func:`simulate_to_precision`).
 PRECISION_TARGET = 1e-3
-#: The most validation draws :func:`simulate_to_precision` rolls out (16 x VALIDATION_SIZE).
-MAX_VALIDATION_SIZE = 32000
-#: Folds of the cross-fitted control-variate regression.
-CV_FOLDS = 10
-# Regression rows per coefficient at least this many, so that coefficients
-# fitted on (CV_FOLDS - 1) folds do not overfit; beyond, fewer features are used.
-_ROWS_PER_FEATURE = 4
-_MAX_FEATURES = 1500
-# Below this many draws the regression has too little to fit: the sample mean is reported.
-_MIN_CV_DRAWS = 200
+#: The most draws :func:`simulate_to_precision` rolls out (64 x VALIDATION_SIZE).
+MAX_VALIDATION_SIZE = 128000
 # Salt that separates validation draws from the instance generator's stream.
 _VALIDATION_SALT = 0x5EED
+# Salt of the importance-sampled draws that extend the validation set.
+_PROPOSAL_SALT = 0x715E
+# Draws simulated at once while refining, and the most recent draws a proposal's cost form is fitted on.
+_ROLLOUT_CHUNK = 8000
+_REFIT_DRAWS = 16000
 
 
 def spectral_radius(M) -> float:
@@ -164,8 +166,12 @@ class Rollout:
 
     ``cost`` and ``stderr`` are normalized by trace(P): the control-variate
     estimate when ``estimator`` names one, else the sample mean. ``plain_cost``
-    and ``plain_stderr`` are always the sample mean and its standard error;
-    ``costs`` holds each trajectory's normalized cost. ``bounded`` is False when
+    and ``plain_stderr`` are the estimate without control variates and its
+    standard error (the sample mean; after an importance-sampled refinement, the
+    batches' weighted means, pooled). ``costs`` holds each trajectory's
+    normalized cost and ``weights`` its likelihood ratio when the last
+    ``importance_draws`` of them were importance-sampled (None: all 1; see
+    :func:`simulate_to_precision`). ``bounded`` is False when
     a state or input became non-finite or exceeded ``bound``; ``max_state`` is
     the largest ``|x_i(t)|`` seen.
     """
@@ -179,77 +185,14 @@ class Rollout:
     plain_cost: float = float("nan")
     plain_stderr: float = float("nan")
     estimator: str = "sample mean"
+    weights: np.ndarray | None = None
+    importance_draws: int = 0
 
     def summary(self) -> dict:
         """What a design stores about this rollout (its extras)."""
-        return {"validation_size": int(self.costs.shape[0]), "cost_estimator": self.estimator,
-                "plain_cost": self.plain_cost, "plain_cost_stderr": self.plain_stderr}
-
-
-def _quadratic_features(instance, x0):
-    """Quadratic monomials of x0 with their exact means, as many as the draws support.
-
-    All pairs i <= j when there are enough draws; else the squares, the pairs
-    coupled in the plant or communication graph, and x0'Px0 (which carries the
-    LQR's cost-to-go, the best single quadratic guess).
-    """
-    m, n = x0.shape
-    budget = min(_MAX_FEATURES, (m * (CV_FOLDS - 1)) // (CV_FOLDS * _ROWS_PER_FEATURE))
-    rows, cols = np.triu_indices(n)
-    name = f"all {rows.size} quadratic monomials"
-    extra = None
-    if rows.size > budget:
-        coupled = (instance.plant_adj != 0) | (instance.comm_adj != 0)
-        coupled = coupled | coupled.T | np.eye(coupled.shape[0], dtype=bool)
-        nodes = instance.state_nodes  # the graphs are between nodes; the monomials between states
-        keep = (rows == cols) | coupled[nodes[rows], nodes[cols]]
-        rows, cols = rows[keep], cols[keep]
-        name = f"{rows.size} squares and graph-coupled monomials + x0'Px0"
-        if rows.size + 1 > budget:
-            rows = cols = np.arange(n)
-            name = f"{n} squares + x0'Px0"
-        extra = np.einsum("bi,bi->b", x0 @ instance.P, x0)[:, None], np.array([instance.trace_P])
-    features = x0[:, rows] * x0[:, cols]
-    means = (rows == cols).astype(float)
-    if extra is not None:
-        features = np.hstack([features, extra[0]])
-        means = np.concatenate([means, extra[1]])
-    return features, means, name
-
-
-def control_variate_estimate(instance, x0, costs) -> tuple[float, float, str]:
-    """Cross-fitted control-variate estimate of the mean of ``costs``.
-
-    Parameters
-    ----------
-    instance : Instance
-    x0 : ndarray, shape (batch, n)
-        Initial conditions, drawn i.i.d. N(0, I): the exact means of the
-        quadratic features rest on it.
-    costs : ndarray, shape (batch,)
-        Each trajectory's cost.
-
-    Returns
-    -------
-    cost, stderr, estimator : float, float, str
-        The estimate, its standard error, and a description of the features.
-        Unbiased for any controller: draw i's residual uses coefficients fitted
-        without the fold that holds it.
-    """
-    costs = np.asarray(costs, dtype=float)
-    m = costs.shape[0]
-    features, means, name = _quadratic_features(instance, np.asarray(x0, dtype=float))
-    centered = np.hstack([np.ones((m, 1)), features - means])
-    fold = np.arange(m) % CV_FOLDS
-    gram, moment = centered.T @ centered, centered.T @ costs
-    residuals = np.empty(m)
-    for k in range(CV_FOLDS):
-        inside = fold == k
-        Ck = centered[inside]
-        coef = np.linalg.lstsq(gram - Ck.T @ Ck, moment - Ck.T @ costs[inside], rcond=None)[0]
-        residuals[inside] = costs[inside] - Ck[:, 1:] @ coef[1:]
-    estimator = f"control variates: {name}, {CV_FOLDS}-fold cross-fit"
-    return float(residuals.mean()), float(residuals.std(ddof=1) / np.sqrt(m)), estimator
+        return {"validation_size": int(self.costs.shape[0]), "importance_draws": self.importance_draws,
+                "cost_estimator": self.estimator, "plain_cost": self.plain_cost,
+                "plain_cost_stderr": self.plain_stderr}
 
 
 def simulate(
@@ -322,39 +265,85 @@ def simulate(
         return Rollout(inf, inf, costs, False, max_state, steps, inf, inf)
     plain, plain_stderr = float(costs.mean()), float(costs.std(ddof=1) / np.sqrt(batch))
     cost, stderr, estimator = plain, plain_stderr, "sample mean"
-    if control_variates and batch >= _MIN_CV_DRAWS:
+    if control_variates and batch >= MIN_CV_DRAWS:
         cost, stderr, estimator = control_variate_estimate(instance, x_start, costs)
     return Rollout(cost, stderr, costs, True, max_state, steps, plain, plain_stderr, estimator)
 
 
+def _pooled(batches: list[tuple[int, float, float]]) -> tuple[float, float]:
+    """Draw-count-weighted mean of independent batch estimates ``(draws, estimate, stderr)``.
+
+    Fixed weights keep the pooled estimate unbiased; weights from the estimated
+    variances would not: a batch that happens to miss a rare costly state
+    reports both a lower cost and a smaller error, and would get more weight.
+    """
+    draws = np.array([b[0] for b in batches], dtype=float)
+    share = draws / draws.sum()
+    return (float(share @ np.array([b[1] for b in batches])),
+            float(np.sqrt(np.sum((share * np.array([b[2] for b in batches]))**2))))
+
+
+def _rollout_in_chunks(instance, controller, x, chunk: int = _ROLLOUT_CHUNK) -> Rollout:
+    """Plain rollout of many draws, a bounded number at a time (a controller's state grows with the batch)."""
+    parts = [simulate(instance, controller, x[i:i + chunk], control_variates=False) for i in range(0, x.shape[0], chunk)]
+    bounded = all(part.bounded for part in parts)
+    costs = np.concatenate([part.costs for part in parts])
+    return Rollout(float("nan"), float("nan"), costs, bounded, max(part.max_state for part in parts), parts[0].steps)
+
+
 def simulate_to_precision(instance, controller, size: int = VALIDATION_SIZE, *,
                           target: float = PRECISION_TARGET, max_size: int = MAX_VALIDATION_SIZE) -> Rollout:
-    """The control-variate estimate on the first ``size`` validation draws, extended until precise.
+    """The control-variate estimate on the first ``size`` validation draws, refined until precise.
 
-    While the relative standard error exceeds ``target``, the rollout continues on
-    the next validation draws (doubling the count, up to ``max_size``): validation
-    sets are nested, so the first ``size`` draws, which every method shares, stay
-    in the estimate, and a well-behaved controller costs no extra rollout. A
-    heavy-tailed cost (a closed loop close to unstable) may stop at ``max_size``
-    above the target; its standard error says so. ``Rollout.costs`` holds every draw used.
+    While the relative standard error exceeds ``target``, the cost is
+    re-estimated on batches of importance-sampled draws (each as large as all
+    draws so far, up to ``max_size`` draws in all). Each batch comes from a
+    :class:`~codesign.estimators.TiltedProposal` along the quadratic form fitted
+    to the costs of the draws before it (at most the latest ``_REFIT_DRAWS``) and
+    is scored by :func:`~codesign.estimators.importance_estimate`; its estimate
+    is unbiased, since its proposal is fixed before its draws are made. The
+    reported cost pools the batches by draw count (:func:`_pooled`); the
+    validation draws only shape the first proposal, because their estimate is
+    the one found too imprecise, and its error is least reliable exactly when a
+    rare costly state was missed. A well-behaved controller stops at the
+    ``size`` draws every method shares and costs no extra rollout. A
+    heavy-tailed cost may stop at ``max_size`` above the target; its standard
+    error says so. If a proposed draw leaves the rollout's bound, the estimate
+    stops at the batches before it and ``estimator`` says so.
+    ``Rollout.costs`` holds every draw's cost and ``Rollout.weights`` its
+    likelihood ratio (1 for validation draws).
     """
     if max_size < size:
         raise ValueError(f"max_size must be at least size ({size}), got {max_size}")
     x0 = validation_set(instance, size)
-    rollout = simulate(instance, controller, x0, control_variates=True)
-    while (rollout.bounded and np.isfinite(rollout.cost) and size < max_size
+    first = simulate(instance, controller, x0, control_variates=True)
+    rollout = first
+    draws, costs, weights = [x0], [first.costs], [np.ones(size)]
+    estimates, plains = [], []
+    total, batch = size, 0
+    while (rollout.bounded and np.isfinite(rollout.cost) and total < max_size
            and rollout.stderr > target * abs(rollout.cost)):
-        size = min(2 * size, max_size)
-        every = validation_set(instance, size)
-        more = simulate(instance, controller, every[x0.shape[0]:], control_variates=False)
-        x0 = every
-        costs = np.concatenate([rollout.costs, more.costs])
+        count = min(total, max_size - total)
+        recent_x, recent_costs = np.vstack(draws)[-_REFIT_DRAWS:], np.concatenate(costs)[-_REFIT_DRAWS:]
+        proposal = TiltedProposal.along(fitted_cost_form(instance, recent_x, recent_costs))
+        x = proposal.draw(instance, count, (_PROPOSAL_SALT, batch))
+        more = _rollout_in_chunks(instance, controller, x)
         if not more.bounded:
-            inf = float("inf")
-            return Rollout(inf, inf, costs, False, more.max_state, rollout.steps, inf, inf)
-        cost, stderr, estimator = control_variate_estimate(instance, x0, costs)
-        rollout = Rollout(cost, stderr, costs, True, max(rollout.max_state, more.max_state), rollout.steps,
-                          float(costs.mean()), float(costs.std(ddof=1) / np.sqrt(costs.size)), estimator)
+            note = f"; stopped: a proposed draw beyond the first {total} left the bound"
+            return replace(rollout, estimator=rollout.estimator + note)
+        cost, stderr, mean, mean_stderr, described = importance_estimate(instance, x, more.costs, proposal)
+        estimates.append((count, cost, stderr))
+        plains.append((count, mean, mean_stderr))
+        draws.append(x)
+        costs.append(more.costs)
+        weights.append(proposal.weights(x))
+        total, batch = total + count, batch + 1
+        rollout = Rollout(*_pooled(estimates), np.concatenate(costs), True,
+                          max(rollout.max_state, more.max_state), first.steps, *_pooled(plains),
+                          f"{described}, on {total - size} draws in {batch} batch{'es' if batch > 1 else ''} "
+                          f"(each proposal fitted to the draws before it, pooled by draw count), after "
+                          f"{first.estimator} on the {size} validation draws",
+                          np.concatenate(weights), total - size)
     return rollout
 
 

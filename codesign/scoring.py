@@ -102,8 +102,8 @@ def evaluate(instance, design: Design, *, validation_size: int = VALIDATION_SIZE
     """Score a method's design the way the harness does.
 
     A simulated cost is recomputed on the instance's first ``validation_size``
-    validation draws (the same draws for every method), continued on the next
-    draws while its relative standard error exceeds 0.1 %
+    validation draws (the same draws for every method), refined on
+    importance-sampled draws while its relative standard error exceeds 0.1 %
     (:func:`codesign.evaluation.simulate_to_precision`), and the design becomes
     ``diverged`` if that rollout is unbounded; exact costs are kept. The cost is
     the control-variate estimate and the extras keep the plain sample mean
@@ -116,8 +116,9 @@ def evaluate(instance, design: Design, *, validation_size: int = VALIDATION_SIZE
         return design
     if design.cost_kind == "simulated":
         # A method that already scored on at least these validation draws with control
-        # variates (the GRNN and GCNN do, extended until precise) used them: no second rollout.
-        done = (design.extras.get("validation_size", 0) >= validation_size
+        # variates (the GRNN and GCNN do, refined until precise) used them: no second rollout.
+        shared = design.extras.get("validation_size", 0) - design.extras.get("importance_draws", 0)
+        done = (shared >= validation_size
                 and str(design.extras.get("cost_estimator", "")).startswith("control variates"))
         if not done:
             rollout = simulate_to_precision(instance, design.controller, validation_size,

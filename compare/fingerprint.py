@@ -24,7 +24,7 @@ from pathlib import Path
 __all__ = ["fingerprint", "fingerprint_details", "package_versions", "EVALUATION_MODULES", "NUMERIC_PACKAGES"]
 
 #: Modules every cost depends on, whatever the method.
-EVALUATION_MODULES = ("codesign.instances", "codesign.design", "codesign.controllers", "codesign.evaluation",
+EVALUATION_MODULES = ("codesign.instances", "codesign.design", "codesign.controllers", "codesign.evaluation", "codesign.estimators",
                       "codesign.scoring", "codesign.methods")
 #: Packages whose version is part of every fingerprint.
 NUMERIC_PACKAGES = ("numpy", "scipy", "cvxpy", "clarabel", "torch")

@@ -22,14 +22,19 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine() or "unknown"
 
 
-def git_commit() -> str | None:
-    """Commit of the checkout the toolkit runs from (``+dirty`` with local changes), or None."""
-    root = Path(__file__).resolve().parent.parent
+#: What the numbers depend on in a checkout: ``+dirty`` means one of these differs from the commit
+#: (regenerated reports or notebooks beside them do not).
+SOURCE_PATHS = ("codesign", "baselines", "compare", "pyproject.toml")
+
+
+def git_commit(root: Path | None = None) -> str | None:
+    """Commit of the checkout the toolkit runs from (``+dirty`` with local changes to its source), or None."""
+    root = Path(__file__).resolve().parent.parent if root is None else Path(root)
     try:
         commit = subprocess.run(["git", "-C", str(root), "rev-parse", "--short=12", "HEAD"], capture_output=True,
                                 text=True, timeout=5, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, timeout=5, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no", "--",
+                                *SOURCE_PATHS], capture_output=True, text=True, timeout=5, check=True).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return None
     return commit + ("+dirty" if dirty else "") if commit else None

@@ -81,12 +81,16 @@ def finish_legend(fig, axes, spare, handles) -> None:
     fig.tight_layout(rect=(0, min(0.5, (0.25 * rows + 0.2) / fig.get_figheight()), 1, 1))
 
 
-def draw_boundary(ax, x: float) -> None:
-    """The plant graph's link count: below it no delayed graph is quadratically invariant."""
+def draw_boundary(ax, x: float, *, below: float = 0.0) -> None:
+    """The plant graph's link count: below it no delayed graph is quadratically invariant.
+
+    The label starts ``below`` points under the top edge (clear of off-scale labels there).
+    """
     ax.axvline(x, color="0.35", linestyle=(0, (1, 2)), linewidth=1.0, zorder=0)
-    ax.text(x, 0.98, " plant graph (QI boundary) ", transform=ax.get_xaxis_transform(), rotation=90,
-            ha="right", va="top", fontsize=7, color="0.35",
-            bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1})
+    ax.annotate(" plant graph (QI boundary) ", (x, 1.0), xycoords=ax.get_xaxis_transform(),
+                xytext=(-1, -4 - below), textcoords="offset points", rotation=90, ha="right", va="top",
+                fontsize=7, color="0.35", zorder=1,  # under the markers: SLS on the plant graph sits on this line
+                bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1})
 
 
 def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundaries: dict | None = None,

@@ -245,14 +245,15 @@ def plot_cost_vs_links(points: list[Point], *, axes=None, colors: dict | None = 
         # Explicit: autoscaling ignores the dodged markers (drawn with an offset transform),
         # which left methods sharing a link count outside the axes.
         ax.set_xlim(-0.4, max(p.links[2] for p in usable) * 1.15 + 1)
+        label_rows = 0
         if top is not None:
-            _mark_off_scale(ax, [p for p in usable if p.cost[1] > top], top, styles)
+            label_rows = _mark_off_scale(ax, [p for p in usable if p.cost[1] > top], top, styles)
         ax.set_xlabel("directed off-diagonal links (median, IQR bars)")
         ax.set_ylabel("normalized cost E[J] / tr(P) (median, IQR bars)")
         ax.set_title(panel_title(panel))
         ax.axhline(1.0, color="0.6", linewidth=0.8, zorder=0)
         if boundaries and panel in boundaries and any(p.info_model == "delayed" for p in usable):
-            draw_boundary(ax, boundaries[panel])
+            draw_boundary(ax, boundaries[panel], below=9.0 * label_rows)
         ax.grid(True, which="major", alpha=0.3)
     used = {p.info_model for p in points if p.ok > 0}
     finish_legend(fig, axes, spare, legend_handles(styles, labels, used))
@@ -304,11 +305,12 @@ def _summary_tables(points: list[Point]) -> list[str]:
     return lines
 
 
-def _mark_off_scale(ax, points, top: float, styles: dict) -> None:
+def _mark_off_scale(ax, points, top: float, styles: dict) -> int:
     """A triangle on the top edge and the median cost below it for each point above the axis.
 
     Labels closer than about 30 points to the previous one in a row go one row lower, so
-    that values at neighbouring link counts stay readable.
+    that values at neighbouring link counts stay readable; a label at either edge of the
+    axes extends inwards. Returns the number of label rows.
     """
     labels: dict[tuple, list[str]] = {}  # (links, text) -> colours: methods sharing a value get one label
     for p in sorted(points, key=lambda p: p.links[1]):
@@ -316,12 +318,15 @@ def _mark_off_scale(ax, points, top: float, styles: dict) -> None:
         ax.plot(p.links[1], top, marker="^", color=colour, markersize=8, clip_on=False, linestyle="none", zorder=5)
         labels.setdefault((p.links[1], f"{p.cost[1]:.3g}"), []).append(colour)
     rows: list[float] = []  # the display x of the last label in each row
+    left, right = (v * 72.0 / ax.figure.dpi for v in ax.transAxes.transform([(0, 0), (1, 0)])[:, 0])
     for (links, text), colours in labels.items():
         x = ax.transData.transform((links, top))[0] * 72.0 / ax.figure.dpi
         row = next((i for i, last in enumerate(rows) if x - last >= 30.0), len(rows))
         rows[row:row + 1] = [x]
-        ax.annotate(text, (links, top), xytext=(0, -4 - 9 * row), textcoords="offset points", ha="center",
+        ha, dx = ("right", 5) if right - x < 20 else ("left", -5) if x - left < 20 else ("center", 0)
+        ax.annotate(text, (links, top), xytext=(dx, -4 - 9 * row), textcoords="offset points", ha=ha,
                     va="top", fontsize=7, color=colours[0] if len(set(colours)) == 1 else "0.25")
+    return len(rows)
 
 
 def _budget_tables(records: Records, budgets=(20, 60, 140, None)) -> list[str]:

@@ -225,18 +225,27 @@ def test_off_scale_values_get_one_label_per_value_and_neighbours_go_a_row_lower(
 
     fig, ax = plt.subplots(figsize=(4, 3))
     ax.set_xscale("symlog", linthresh=1.0)
-    ax.set_xlim(-0.4, 400)
+    ax.set_xlim(-0.2, 400)
     ax.set_ylim(0.9, 2.0)
 
     def point(label, links, cost):
         return SimpleNamespace(label=label, links=(links, links, links), cost=(cost, cost, cost))
 
     styles = {name: (colour, "o") for name, colour in (("a", "red"), ("b", "blue"), ("c", "green"))}
-    _mark_off_scale(ax, [point("a", 0, 2.3), point("b", 0, 2.3), point("c", 0, 1e26), point("a", 300, 5.0)],
-                    2.0, styles)
+    rows = _mark_off_scale(ax, [point("a", 0, 2.3), point("b", 0, 2.3), point("c", 0, 1e26), point("a", 300, 5.0),
+                                point("b", 10, 3.0)], 2.0, styles)
     texts = {t.get_text(): t for t in ax.texts}
-    assert sorted(texts) == ["1e+26", "2.3", "5"]
+    assert sorted(texts) == ["1e+26", "2.3", "3", "5"]
     assert texts["2.3"].get_color() == "0.25"  # shared by two methods
     assert texts["1e+26"].xyann[1] != texts["2.3"].xyann[1]  # same link count: stacked, not overlapping
     assert texts["5"].xyann[1] == -4  # far from the others: first row
+    assert rows == 2
+    # At the axes' edges a label extends inwards instead of past the frame.
+    assert texts["5"].get_ha() == "right" and texts["2.3"].get_ha() == "left" and texts["3"].get_ha() == "center"
+
+    from compare.figures import draw_boundary
+
+    draw_boundary(ax, 300, below=9.0 * rows)  # its label starts under the off-scale labels
+    boundary = next(t for t in ax.texts if "QI boundary" in t.get_text())
+    assert boundary.xyann[1] < min(t.xyann[1] for t in texts.values()) - 7
     plt.close(fig)

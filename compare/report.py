@@ -406,12 +406,18 @@ def _precision_text(records: Records) -> str:
         return ""
     plain = [r.extras["plain_cost_stderr"] / r.extras["plain_cost"] for r in simulated
              if "plain_cost_stderr" in r.extras and r.extras["plain_cost"] > 0]
-    cv = sum(str(r.extras.get("cost_estimator", "")).startswith("control variates") for r in simulated)
+    cv = sum(str(r.extras.get("cost_estimator", "")).startswith(("control variates", "importance sampling"))
+             for r in simulated)
     how = "control variates" if cv == len(rel) else f"control variates for {cv} of {len(rel)}, else the sample mean"
+    refined = sum(r.extras.get("importance_draws", 0) > 0 for r in simulated)
+    if refined:
+        most = max(r.extras.get("importance_draws", 0) for r in simulated)
+        how += f"; {refined} heavy-tailed costs re-estimated on up to {most:,} importance-sampled draws of their own"
     text = (f" ({how}; relative standard error: median {np.median(rel):.3%}, largest {max(rel):.3%} over "
             f"{len(rel)} simulated designs")
     if plain:
-        text += f"; the plain sample mean, kept in `runs.csv`, has a median of {np.median(plain):.2%}"
+        text += (f"; the estimate without control variates, kept in `runs.csv` as `plain_cost`, has a median of "
+                 f"{np.median(plain):.2%}")
     return text + ")"
 
 

@@ -249,3 +249,21 @@ def test_off_scale_values_get_one_label_per_value_and_neighbours_go_a_row_lower(
     boundary = next(t for t in ax.texts if "QI boundary" in t.get_text())
     assert boundary.xyann[1] < min(t.xyann[1] for t in texts.values()) - 7
     plt.close(fig)
+
+
+def test_report_says_how_many_simulated_costs_were_refined_on_importance_draws():
+    from compare.records import Records
+    from compare.report import _precision_text
+
+    def row(stderr, estimator, importance):
+        return {"cost": 2.0, "cost_stderr": stderr, "cost_kind": "simulated", "status": "optimal",
+                "extras": {"cost_estimator": estimator, "plain_cost": 2.0, "plain_cost_stderr": 0.02,
+                           "validation_size": 2000 + importance, "importance_draws": importance}}
+
+    records = Records.from_rows([row(2e-4, "control variates: all 210 quadratic monomials", 0),
+                                 row(1.6e-3, "importance sampling tilted along ...", 62000)])
+    text = _precision_text(records)
+    assert text.startswith(" (control variates; 1 heavy-tailed costs re-estimated on up to 62,000")
+    assert "largest 0.080%" in text and "median of 1.00%" in text
+    plain = _precision_text(Records.from_rows([row(2e-4, "control variates: ...", 0)]))
+    assert "re-estimated" not in plain and plain.startswith(" (control variates; relative")

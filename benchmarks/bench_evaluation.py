@@ -16,7 +16,7 @@ It prints per method the median and largest relative standard error of the
 reported cost (target ≤ 0.1 %), the most draws used, and the evaluation seconds per design
 (median before and after, their ratio, and the largest after).
 
-    python benchmarks/bench_evaluation.py             # 5 instances per ‖A‖, about 6 minutes on 2 cores
+    python benchmarks/bench_evaluation.py             # 5 instances per ‖A‖, about 7 minutes on 2 cores
     python benchmarks/bench_evaluation.py --instances 2
 """
 

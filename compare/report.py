@@ -421,6 +421,29 @@ def _precision_text(records: Records) -> str:
     return text + ")"
 
 
+# Above this relative standard error a refined cost is not a number to compare at the
+# third digit: in the shipped reports every such cost came from rare divergent draws.
+UNCERTAIN_RSE = 0.01
+
+
+def _uncertain_text(records: Records) -> str:
+    """A warning naming the panels whose simulated costs stay imprecise after refinement (empty if none)."""
+    uncertain = records.filter(lambda r: r.cost_kind == "simulated" and r.status in OK_STATUSES and r.ok
+                               and r.cost > 0 and r.cost_stderr > UNCERTAIN_RSE * r.cost)
+    if not len(uncertain):
+        return ""
+    where = "; ".join(f"{len(rs)} of {label} on {panel_title(panel)}"
+                      for (panel, label), rs in sorted(uncertain.by_panel_label.items(),
+                                                       key=lambda item: (str(item[0][0]), item[0][1])))
+    return (f" {len(uncertain)} simulated costs keep a relative standard error above {UNCERTAIN_RSE:.0%} even so "
+            f"({where}). Such a cost is dominated by rare initial states from which the closed loop diverges "
+            "within the horizon (the GRNN's and the GCNN's inputs pass through tanh and are bounded, so on an "
+            "unstable plant their region of attraction is bounded too); draws that rare are hardly ever "
+            "sampled, so the estimate tends to be low and its standard error understates the uncertainty. "
+            "Treat these costs as unresolved, not as measured (docs/evaluation.md, "
+            "\"Costs dominated by rare divergent draws\").")
+
+
 def _sls_bounds(records: Records) -> dict:
     """Panel -> (median, instances) of SLS on the complete graph at one hop per step, act_delay 1.
 
@@ -700,7 +723,7 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
         "Costs are E[J] / trace(P) over the horizon (centralized LQR = 1); links are directed off-diagonal "
         "communication links (self-loops are local feedback and listed separately). "
         "Exact closed-form costs for linear controllers; for learned ones an estimate on the validation set, "
-        "shared by every method on an instance" + _precision_text(records) + "."
+        "shared by every method on an instance" + _precision_text(records) + "." + _uncertain_text(records)
         + (f" The store also holds {superseded} runs made by code that has changed since; they are not "
            "shown (see Code fingerprints)." if superseded else ""),
         "",

@@ -267,3 +267,21 @@ def test_report_says_how_many_simulated_costs_were_refined_on_importance_draws()
     assert "largest 0.080%" in text and "median of 1.00%" in text
     plain = _precision_text(Records.from_rows([row(2e-4, "control variates: ...", 0)]))
     assert "re-estimated" not in plain and plain.startswith(" (control variates; relative")
+
+
+def test_report_warns_about_costs_that_stay_imprecise_after_refinement():
+    from compare.records import Records
+    from compare.report import _uncertain_text
+
+    def row(label, stderr, a_norm):
+        return {"label": label, "cost": 2.0, "cost_stderr": stderr, "cost_kind": "simulated", "status": "optimal",
+                "instance": {"family": "paper", "n": 20, "a_norm": a_norm, "seed": 0},
+                "extras": {"cost_estimator": "importance sampling ...", "importance_draws": 126000}}
+
+    precise = Records.from_rows([row("GRNN", 1.9e-3, 1.2), row("GCNN", 1.5e-2, 1.2)])
+    assert _uncertain_text(precise.filter(lambda r: r.label == "GRNN")) == ""  # 0.1 %: imprecise, not unresolved
+    text = _uncertain_text(Records.from_rows([row("GRNN", 0.3, 1.2), row("GRNN", 0.1, 1.2), row("GCNN", 0.03, 1.05),
+                                              row("GCNN", 1e-3, 1.2)]))
+    assert text.startswith(" 3 simulated costs keep a relative standard error above 1%")
+    assert "(1 of GCNN on N = 20, ‖A‖₂ = 1.05; 2 of GRNN on N = 20, ‖A‖₂ = 1.2)" in text
+    assert "rare initial states" in text and "docs/evaluation.md" in text

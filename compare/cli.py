@@ -19,14 +19,14 @@ __all__ = ["main"]
 #: Approximate wall time of ``compare run PRESET`` on 2 cores (2 workers), report included.
 #: A preset missing here is listed as "not measured".
 PRESET_TIMES = {
-    "quick": "~1 min (65 s measured)",
+    "quick": "~1 min (61 s measured)",
     "baselines-small": "~20 s (16 s measured)",
     "sls-small": "~15 s (15 s measured)",
     "table1-small": "~40 s (38 s measured)",
-    "table1": "~10 min (608 s measured)",
-    "tradeoff": "~30 min (1810 s measured)",
-    "systems": "~3 min (173 s measured)",
-    "scale": "~19 min (1139 s measured)",
+    "table1": "~11 min (639 s measured)",
+    "tradeoff": "~50 min (3057 s measured)",
+    "systems": "~3 min (195 s measured)",
+    "scale": "~23 min (1355 s measured)",
 }
 
 

@@ -325,7 +325,9 @@ def _mark_off_scale(ax, points, top: float, styles: dict) -> int:
         rows[row:row + 1] = [x]
         ha, dx = ("right", 5) if right - x < 20 else ("left", -5) if x - left < 20 else ("center", 0)
         ax.annotate(text, (links, top), xytext=(dx, -4 - 9 * row), textcoords="offset points", ha=ha,
-                    va="top", fontsize=7, color=colours[0] if len(set(colours)) == 1 else "0.25")
+                    va="top", fontsize=7, color=colours[0] if len(set(colours)) == 1 else "0.25", zorder=6,
+                    # A light backing keeps a value legible where a curve runs under it.
+                    bbox={"boxstyle": "square,pad=0.1", "facecolor": "white", "edgecolor": "none", "alpha": 0.85})
     return len(rows)
 
 

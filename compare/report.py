@@ -430,13 +430,12 @@ UNCERTAIN_RSE = 0.01
 
 def _uncertain_text(records: Records) -> str:
     """A warning naming the panels whose simulated costs stay imprecise after refinement (empty if none)."""
-    uncertain = records.filter(lambda r: r.cost_kind == "simulated" and r.status in OK_STATUSES and r.ok
-                               and r.cost > 0 and r.cost_stderr > UNCERTAIN_RSE * r.cost)
+    uncertain = records.filter(lambda r: r.cost_kind == "simulated" and r.ok and r.cost > 0
+                               and r.cost_stderr > UNCERTAIN_RSE * r.cost)
     if not len(uncertain):
         return ""
     where = "; ".join(f"{len(rs)} of {label} on {panel_title(panel)}"
-                      for (panel, label), rs in sorted(uncertain.by_panel_label.items(),
-                                                       key=lambda item: (str(item[0][0]), item[0][1])))
+                      for (panel, label), rs in sorted(uncertain.by_panel_label.items()))
     return (f" {len(uncertain)} simulated costs keep a relative standard error above {UNCERTAIN_RSE:.0%} even so "
             f"({where}). Such a cost is dominated by rare initial states from which the closed loop diverges "
             "within the horizon (the GRNN's and the GCNN's inputs pass through tanh and are bounded, so on an "

@@ -1,22 +1,26 @@
-"""Seconds per 750-step GRNN training, against the machine's own matrix-product peak.
+"""Seconds per 750-step GRNN training, per engine, against the machine's own matrix-product peak.
 
 Trains M GRNN models of the paper's size (N = 20, T = 50, batch 20, h = 5,
 validation curve every 10 steps on 100 draws) for a fixed number of steps with
 :func:`codesign.training.train_stack`, for M = 1 and M = 64 (or ``--models``),
-and prints, measured in this one run:
+with each engine (``torch``: one torch call per product and time step;
+``fused``: one compiled numba pass per model, :mod:`codesign.fused`), and
+prints, measured in this one run:
 
-* seconds per 750-step model of each and their ratio;
-* the arithmetic of one model (floating-point operations, counted from the
-  trainer's products) and the rate it achieves per core, against the
-  single-core peak of a large matrix product measured here (``matmul peak``);
-* the *kernel bound*: the same per-time-step products and elementwise passes
-  the trainer issues, each timed alone at the stack's shapes and summed. It is
-  the time per model torch's kernels need with no Python, no cache misses and
-  no other work; the trainer cannot beat it without a fused kernel;
-* seconds per model at N = 50 and N = 100 (``--sizes``).
+* seconds per 750-step model of each, per core, and the ratios;
+* the arithmetic of one model (floating-point operations counted from the
+  torch engine's dense products) and the rate it achieves per core, against
+  the single-core peak of a large matrix product measured here (``matmul
+  peak``). The fused engine skips the zeros of S, A and B, so its rate is an
+  effective one: the dense work divided by its time;
+* the torch engine's *kernel bound*: the same per-time-step products and
+  elementwise passes it issues, each timed alone at the stack's shapes and
+  summed. No arrangement of torch calls beats it;
+* seconds per model at N = 50 and N = 100 (``--sizes``), per engine.
 
 The paper's own code takes 20-28 s per model on a 2-core machine. The trainer
-runs on CPU tensors; no GPU figure is measured here.
+runs on CPU; no GPU figure is measured here. Compiling the fused kernels
+(seconds, once per shape; numba caches them on disk) happens in the warm-up.
 
     python benchmarks/bench_grnn.py                 # float64 and float32, 2 processes x 1 thread
     python benchmarks/bench_grnn.py --procs 1 --threads 2 --dtype float32 --steps 30
@@ -59,23 +63,25 @@ def make_specs(M: int, instances) -> list[ModelSpec]:
 
 
 def _train_share(args):
-    M, offset, count, steps, dtype, threads, barrier, n = args
+    M, offset, count, steps, dtype, threads, barrier, n, engine = args
     torch.set_num_threads(threads)
     instances = [paper_instance(seed, n=n) for seed in range(min(M, 8))]
     specs = make_specs(M, instances)[offset:offset + count]
-    train_stack(specs[:2], steps=2, batch=BATCH, horizon=HORIZON, dtype=dtype)  # warm-up (allocator, BLAS)
+    train_stack(specs[:2], steps=2, batch=BATCH, horizon=HORIZON, dtype=dtype, engine=engine)  # warm-up (allocator, BLAS, compiling)
     if barrier is not None:
         barrier.wait()
     start = time.perf_counter()
-    train_stack(specs, steps=steps, batch=BATCH, horizon=HORIZON, dtype=dtype, curve_every=CURVE_EVERY)
+    train_stack(specs, steps=steps, batch=BATCH, horizon=HORIZON, dtype=dtype, curve_every=CURVE_EVERY,
+                engine=engine)
     return start, time.perf_counter()
 
 
-def seconds_per_model(M: int, steps: int, dtype: str, threads: int, procs: int, n: int = 20) -> float:
+def seconds_per_model(M: int, steps: int, dtype: str, threads: int, procs: int, n: int = 20,
+                      engine: str = "torch") -> float:
     """Wall seconds per 750-step model; with procs > 1 the M models are split over that many
     single-stack processes running at once (how the runner uses several cores)."""
     if procs == 1 or M < procs:
-        start, end = _train_share((M, 0, M, steps, dtype, threads, None, n))
+        start, end = _train_share((M, 0, M, steps, dtype, threads, None, n, engine))
         return (end - start) / M * (750 / steps)
     ctx = multiprocessing.get_context("spawn")
     with ctx.Manager() as manager:
@@ -83,7 +89,7 @@ def seconds_per_model(M: int, steps: int, dtype: str, threads: int, procs: int, 
         shares = [M // procs + (i < M % procs) for i in range(procs)]
         offsets = [sum(shares[:i]) for i in range(procs)]
         with ctx.Pool(procs) as pool:
-            spans = pool.map(_train_share, [(M, o, c, steps, dtype, threads, barrier, n)
+            spans = pool.map(_train_share, [(M, o, c, steps, dtype, threads, barrier, n, engine)
                                             for o, c in zip(offsets, shares)])
     wall = max(end for _, end in spans) - min(start for start, _ in spans)
     return wall / M * (750 / steps)
@@ -180,6 +186,7 @@ def main(argv=None) -> None:
     parser.add_argument("--models", type=int, default=64, help="stack size M of the batched run (default 64)")
     parser.add_argument("--steps", type=int, default=50, help="training steps timed (extrapolated to 750)")
     parser.add_argument("--dtype", choices=("float64", "float32", "both"), default="both")
+    parser.add_argument("--engines", nargs="+", choices=("torch", "fused"), default=["torch", "fused"])
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads per process (default 1)")
     parser.add_argument("--procs", type=int, default=2,
                         help="processes sharing the M models, one stack each (default 2: one per core)")
@@ -196,28 +203,36 @@ def main(argv=None) -> None:
           f"{torch.backends.cpu.get_cpu_capability()}")
     flops, train_flops = training_flops(20), training_flops(20, curve_every=0)
     print(f"arithmetic per 750-step model: {flops / 1e9:.2f} GFLOP (training {train_flops / 1e9:.2f}"
-          f" + validation curve)")
-    print(f"{'dtype':8} {'M':>4} {'s / model':>10} {'s / model / core':>17} {'GFLOP/s / core':>15} "
+          f" + validation curve), dense")
+    print(f"{'dtype':8} {'engine':6} {'M':>4} {'s / model':>10} {'s / model / core':>17} {'GFLOP/s / core':>15} "
           f"{'matmul peak':>12} {'of peak':>8}")
     for dtype in dtypes:
         peak = matmul_peak(dtype)
-        single = seconds_per_model(1, args.steps, dtype, args.threads, 1)
-        many = seconds_per_model(args.models, args.steps, dtype, args.threads, args.procs)
-        for M, wall, used in ((1, single, args.threads), (args.models, many, cores)):
-            rate = flops / (wall * used) / 1e9
-            print(f"{dtype:8} {M:>4} {wall:>10.3f} {wall * used:>17.3f} {rate:>15.1f} {peak:>12.1f} "
-                  f"{rate / peak:>8.1%}")
-        print(f"{dtype:8} ratio M=1 / M={args.models}: {single / many:.1f}x wall")
-        per_stack = -(-args.models // args.procs)
-        bound = kernel_bound(per_stack, dtype)
-        print(f"{dtype:8} kernel bound at M={per_stack} per process: {bound:.3f} s / model / core "
-              f"(training only: {train_flops / bound / 1e9:.1f} GFLOP/s); the trainer takes "
-              f"{many * cores / bound:.2f}x that with its validation curve")
+        batched = {}
+        for engine in args.engines:
+            single = seconds_per_model(1, args.steps, dtype, args.threads, 1, engine=engine)
+            many = batched[engine] = seconds_per_model(args.models, args.steps, dtype, args.threads, args.procs,
+                                                       engine=engine)
+            for M, wall, used in ((1, single, args.threads), (args.models, many, cores)):
+                rate = flops / (wall * used) / 1e9
+                print(f"{dtype:8} {engine:6} {M:>4} {wall:>10.3f} {wall * used:>17.3f} {rate:>15.1f} {peak:>12.1f} "
+                      f"{rate / peak:>8.1%}")
+            print(f"{dtype:8} {engine:6} ratio M=1 / M={args.models}: {single / many:.1f}x wall")
+        if "torch" in batched:
+            per_stack = -(-args.models // args.procs)
+            bound = kernel_bound(per_stack, dtype)
+            print(f"{dtype:8} torch  kernel bound at M={per_stack} per process: {bound:.3f} s / model / core "
+                  f"(training only: {train_flops / bound / 1e9:.1f} GFLOP/s); the torch engine takes "
+                  f"{batched['torch'] * cores / bound:.2f}x that with its validation curve")
+        if len(batched) == 2:
+            print(f"{dtype:8} fused engine: {batched['torch'] / batched['fused']:.2f}x the torch engine's speed "
+                  f"at M={args.models}")
     for n in args.sizes:
-        wall = seconds_per_model(args.large_models, args.large_steps, "float32", 1, 1, n=n)
-        rate = training_flops(n) / wall / 1e9
-        print(f"N={n:<4d} float32 M={args.large_models}: {wall:.2f} s / 750-step model on one core "
-              f"({training_flops(n) / 1e9:.1f} GFLOP, {rate:.1f} GFLOP/s)")
+        for engine in args.engines:
+            wall = seconds_per_model(args.large_models, args.large_steps, "float32", 1, 1, n=n, engine=engine)
+            rate = training_flops(n) / wall / 1e9
+            print(f"N={n:<4d} float32 {engine:6} M={args.large_models}: {wall:.2f} s / 750-step model on one core "
+                  f"({training_flops(n) / 1e9:.1f} GFLOP dense, {rate:.1f} GFLOP/s)")
 
 
 if __name__ == "__main__":

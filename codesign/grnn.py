@@ -26,7 +26,7 @@ from .evaluation import (exact_cost, impulse_responses, simulate, simulate_to_pr
                          validation_set)
 from .methods import method
 from ._lazy import lazy_import
-from .training import ACTIVATIONS, DTYPES, ModelSpec, _tanh_, init_fwg, train_stack
+from .training import ACTIVATIONS, DTYPES, ENGINES, ModelSpec, _tanh_, init_fwg, train_stack
 
 torch = lazy_import("torch")
 
@@ -220,7 +220,7 @@ def grnn_defaults() -> dict:
     return dict(
         steps=750, batch=20, hidden=5, lr=0.02, l1_lr=0.03, clip=10.0, frob=2.0,
         ensemble=2, refine_ensemble=1, threshold=4e-3, curve_every=10, curve_size=100,
-        dtype="float64", stability_steps=500, stability_size=100, activation="tanh",
+        dtype="float64", stability_steps=500, stability_size=100, activation="tanh", engine="torch",
     )
 
 
@@ -261,6 +261,11 @@ def _check_job(instance, variant, beta, seed, settings) -> dict:
         raise ValueError(f"dtype must be one of {sorted(DTYPES)}, got {s['dtype']!r}")
     if s["activation"] not in ACTIVATIONS:
         raise ValueError(f"activation must be one of {ACTIVATIONS}, got {s['activation']!r}")
+    if s["engine"] not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {s['engine']!r}")
+    if s["engine"] == "fused" and not instance.scalar_nodes:
+        raise ValueError("engine 'fused' needs one state and one input per node; this instance has nodes "
+                         "with several (use engine 'torch' or 'auto')")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     return s
@@ -371,18 +376,18 @@ def _train_groups(specs_by_job: list[list[ModelSpec]], jobs: list[_Job], stack_s
     for j, (job, specs) in enumerate(zip(jobs, specs_by_job)):
         s = job.settings
         key = (s["steps"], s["batch"], job.instance.horizon, s["clip"], s["curve_every"], s["dtype"],
-               s["activation"], s["hidden"], s["curve_size"], job.instance.n, job.instance.m, job.instance.nodes,
+               s["activation"], s["engine"], s["hidden"], s["curve_size"], job.instance.n, job.instance.m, job.instance.nodes,
                _slot_index(job.instance.state_nodes, job.instance.nodes)[1],
                _slot_index(job.instance.input_nodes, job.instance.nodes)[1])
         groups.setdefault(key, []).extend((j, k) for k in range(len(specs)))
     for key, members in groups.items():
-        steps, batch, horizon, clip, curve_every, dtype, activation = key[:7]
+        steps, batch, horizon, clip, curve_every, dtype, activation, engine = key[:8]
         for start in range(0, len(members), stack_size):
             chunk = members[start:start + stack_size]
             t0 = time.perf_counter()
             out = train_stack([specs_by_job[j][k] for j, k in chunk], steps=steps, batch=batch,
                               horizon=horizon, clip=clip, curve_every=curve_every, dtype=dtype,
-                              activation=activation)
+                              activation=activation, engine=engine)
             share = (time.perf_counter() - t0) / len(chunk)
             for (j, k), result in zip(chunk, out):
                 results[j][k] = result
@@ -535,7 +540,7 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
          clip: float = 10.0, frob: float = 2.0, ensemble: int = 2, refine_ensemble: int = 1,
          threshold: float = 4e-3, curve_every: int = 10, curve_size: int = 100,
          dtype: str = "float64", stability_steps: int = 500, stability_size: int = 100,
-         activation: str = "tanh") -> Design:
+         activation: str = "tanh", engine: str = "torch") -> Design:
     """Train a GRNN distributed controller on ``instance`` (paper Sec. III).
 
     Parameters
@@ -582,7 +587,7 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
     curve_size : int
         Draws of the selection set (training curve and ensemble selection), apart from the validation set.
     dtype : {"float64", "float32"}
-        Training precision; float32 is about twice as fast.
+        Training precision; float32 is 1.3-3x as fast (docs/performance.md).
     stability_steps : int
         Length of the boundedness check rollout (0 skips it).
     stability_size : int
@@ -592,6 +597,12 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
         linear GRNN: a linear dynamic controller with the same parameterization,
         information model and training, scored exactly with ``cost_kind="exact"``;
         ``bounded`` is then whether its closed loop's spectral radius is below 1).
+    engine : {"torch", "fused", "auto"}
+        How the loss and its gradient are computed: one torch call per product
+        and time step, or one compiled pass per model (numba), 1.3-3.5x as fast,
+        needing one state and one input per node; "auto" takes "fused" where it
+        applies. The engines agree to rounding at every step, but a 750-step run
+        on an unstable plant can amplify that to ~1e-4 in the final cost.
 
     Returns
     -------
@@ -607,7 +618,8 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
     settings = dict(steps=steps, batch=batch, hidden=hidden, lr=lr, l1_lr=l1_lr, clip=clip, frob=frob,
                     ensemble=ensemble, refine_ensemble=refine_ensemble, threshold=threshold,
                     curve_every=curve_every, curve_size=curve_size, dtype=dtype,
-                    stability_steps=stability_steps, stability_size=stability_size, activation=activation)
+                    stability_steps=stability_steps, stability_size=stability_size, activation=activation,
+                    engine=engine)
     return grnn_batch([(instance, {"variant": variant, "beta": beta, "seed": seed, **settings})])[0]
 
 

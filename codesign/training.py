@@ -35,6 +35,8 @@ import numpy as np
 from ._lazy import lazy_import
 
 torch = lazy_import("torch")
+#: Imported only when the fused engine runs (it loads numba), yet part of this code's fingerprint.
+FINGERPRINT_MODULES = ("codesign.fused",)
 
 __all__ = [
     "ModelSpec",
@@ -47,6 +49,7 @@ __all__ = [
     "init_fwg",
     "DTYPES",
     "ACTIVATIONS",
+    "ENGINES",
     "torch_dtype",
     "no_grad",
 ]
@@ -55,11 +58,28 @@ __all__ = [
 DTYPES = ("float32", "float64")
 #: The GRNN's activation σ: the paper's tanh, or the identity (a linear dynamic controller).
 ACTIVATIONS = ("tanh", "identity")
+#: How a stack's loss and gradient are computed: one torch call per product and time step
+#: (any node layout), or one compiled pass per model (:mod:`codesign.fused`, numba; one state
+#: and one input per node); "auto" takes "fused" where it applies.
+ENGINES = ("auto", "torch", "fused")
 
 
 def _check_activation(activation: str) -> None:
     if activation not in ACTIVATIONS:
         raise ValueError(f"activation must be one of {ACTIVATIONS}, got {activation!r}")
+
+
+def resolve_engine(engine: str, states_per_node: int = 1, inputs_per_node: int = 1) -> str:
+    """The engine that runs: ``engine`` itself, or for "auto" "fused" where it applies, else "torch"."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    scalar = states_per_node == inputs_per_node == 1
+    if engine == "fused" and not scalar:
+        raise ValueError(f"engine 'fused' needs one state and one input per node, this stack has "
+                         f"{states_per_node} and {inputs_per_node}; use engine 'torch' or 'auto'")
+    if engine == "auto":
+        return "fused" if scalar else "torch"
+    return engine
 
 
 def torch_dtype(name: str):
@@ -442,9 +462,15 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None,
     dF = dF.view(F.shape)
     dG = dG.view(G.shape) if q == 1 else dG.transpose(1, 2).reshape(G.shape)
     dW = dWt.transpose(1, 2)
-    loss = J / Bsz + beta * S.abs().sum((1, 2))
-    grads = [dS, dF, dW, dG]
-    for k, param in enumerate((S, F, W, G)):
+    return _penalized(J / Bsz, [dS, dF, dW, dG], (S, F, W, G), penalty, beta)
+
+
+def _penalized(cost, grads, params, penalty, beta):
+    """Loss = cost + sum_k penalty_k ||param_k||_F + beta sum |S|, and its gradient from the cost's."""
+    S = params[0]
+    loss = cost + beta * S.abs().sum((1, 2))
+    grads = list(grads)
+    for k, param in enumerate(params):
         weight = penalty[:, k]
         norm = _norm(param)
         loss = loss + weight * norm
@@ -508,6 +534,7 @@ def train_stack(
     curve_every: int = 10,
     dtype: str = "float64",
     activation: str = "tanh",
+    engine: str = "torch",
 ) -> list[TrainResult]:
     """Train the models of ``specs`` together; one :class:`TrainResult` per spec.
 
@@ -518,7 +545,8 @@ def train_stack(
     gradient stops being finite is frozen and reported ``diverged``; the others
     go on. The validation curve (mean normalized cost on ``spec.curve_x0``) is
     recorded every ``curve_every`` updates and after the last one. Every model of
-    the stack uses the same ``activation`` (one of :data:`ACTIVATIONS`).
+    the stack uses the same ``activation`` (one of :data:`ACTIVATIONS`) and ``engine``
+    (one of :data:`ENGINES`; the engines agree to rounding).
     """
     tdt = torch_dtype(dtype)
     _check_activation(activation)
@@ -530,6 +558,7 @@ def train_stack(
     N = specs[0].S0.shape[0]
     prob = _Problem(specs, tdt)
     _, p, q = _node_sizes(prob, N)
+    engine = resolve_engine(engine, p, q)
     padded = p * N
     placements = [np.arange(padded) if s.state_index is None else np.asarray(s.state_index) for s in specs]
     if len({len(k) for k in placements}) != 1:
@@ -558,13 +587,37 @@ def train_stack(
     last_loss = torch.full((M,), float("nan"), dtype=tdt)
 
     h = W.shape[1]
-    ws_train = _Workspace(M, N, batch, h, horizon, tdt, keep=True, p=p, q=q)
-    ws_curve = _Workspace(M, N, curve_x0.shape[1], h, horizon, tdt, keep=False, p=p, q=q)
     draws = np.zeros((M, batch, padded))
+    if engine == "fused":
+        from . import fused
+
+        compiled = fused.FusedStack(prob.A.numpy(), prob.B.numpy(), prob.Q.numpy(), prob.R.numpy(),
+                                    prob.P.numpy(), S.numpy(), mask.numpy(), hidden=h, horizon=horizon,
+                                    batch=batch, dtype=S.numpy().dtype, squash=activation == "tanh")
+        curve_nodes = np.ascontiguousarray(curve_x0.numpy().transpose(0, 2, 1))
+        arrays = [param.numpy() for param in params]  # views: Adam updates them in place
+
+        def loss_and_grad(x0):
+            J, *grads = compiled.loss_and_grad(*arrays, np.ascontiguousarray(x0.numpy().transpose(0, 2, 1)))
+            return _penalized(torch.from_numpy(J) / batch, [torch.from_numpy(g) for g in grads], params,
+                              penalty, beta)
+
+        def curve_cost():
+            return torch.from_numpy(compiled.costs(*arrays, curve_nodes)) / curve_x0.shape[1] / prob.trace_P
+    else:
+        ws_train = _Workspace(M, N, batch, h, horizon, tdt, keep=True, p=p, q=q)
+        ws_curve = _Workspace(M, N, curve_x0.shape[1], h, horizon, tdt, keep=False, p=p, q=q)
+
+        def loss_and_grad(x0):
+            return grnn_loss_and_grad(prob, S, F, W, G, x0, penalty=penalty, beta=beta, horizon=horizon,
+                                      ws=ws_train, activation=activation)
+
+        def curve_cost():
+            return rollout_cost(prob, S, F, W, G, curve_x0, horizon, ws_curve, activation)
 
     def record(k):
         curve_steps.append(k)
-        curve_costs.append(rollout_cost(prob, S, F, W, G, curve_x0, horizon, ws_curve, activation))
+        curve_costs.append(curve_cost())
 
     for k in range(steps):
         if curve_every and k % curve_every == 0:
@@ -573,10 +626,7 @@ def train_stack(
             draws[m][:, where] = rng.standard_normal((batch, len(where)))
         x0 = torch.tensor(draws, dtype=tdt)
         x0.mul_(alive.view(M, 1, 1).to(tdt))
-        loss, grads = grnn_loss_and_grad(
-            prob, S, F, W, G, x0, penalty=penalty, beta=beta, horizon=horizon, ws=ws_train,
-            activation=activation,
-        )
+        loss, grads = loss_and_grad(x0)
         grads[0].mul_(maskf)
         norm, coef = clip_coefficients(grads, clip if clip else float("inf"))
         bad = alive & ~(torch.isfinite(loss) & torch.isfinite(norm))

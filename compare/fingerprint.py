@@ -1,7 +1,8 @@
 """Code fingerprints: a stored run is reused only if the code that made it is unchanged.
 
 A method's fingerprint hashes the source of its module and of every project module
-that module uses (followed through its globals, transitively), the project's
+that module uses (followed through its globals, transitively, and through the names
+a module lists in ``FINGERPRINT_MODULES``: those it imports only when needed), the project's
 evaluation code (instances, designs, controllers, evaluation, scoring), and the
 versions of the numerical packages its numbers depend on (those every method uses, and
 those a module of the closure names in ``FINGERPRINT_PACKAGES``, e.g. the ℓ1 SDP's
@@ -62,6 +63,8 @@ def _closure(names) -> list[types.ModuleType]:
         if module.__name__ in seen:
             continue
         seen[module.__name__] = module
+        # Modules a module imports only when needed (heavy dependencies) declare themselves.
+        todo.extend(import_module(name) for name in getattr(module, "FINGERPRINT_MODULES", ()))
         for value in vars(module).values():
             if isinstance(value, types.ModuleType):
                 ref = value

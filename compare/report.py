@@ -44,7 +44,7 @@ from .records import OK_STATUSES, Records, as_records  # noqa: E402
 #: one-step-delay dynamic controller with the same link count never look alike.
 INFO_STYLE = {info: {"linestyle": style, "description": text} for info, (style, text) in LINESTYLES.items()}
 
-_PACKAGES = ("grnn-codesign", "numpy", "scipy", "cvxpy", "clarabel", "scs", "control", "torch", "networkx", "matplotlib")
+_PACKAGES = ("grnn-codesign", "numpy", "scipy", "cvxpy", "clarabel", "scs", "control", "torch", "numba", "networkx", "matplotlib")
 
 
 def quartiles(values) -> tuple[float, float, float]:

@@ -6,7 +6,7 @@ import numpy as np
 import torch
 
 from baselines.sparse_delayed import delayed_closed_loop
-from codesign.training import _Problem, grnn_loss_and_grad, loss_autograd
+from codesign.training import _penalized, _Problem, grnn_loss_and_grad, loss_autograd
 
 
 def augmented_delayed_reference(instance, K_local, K_delayed):
@@ -37,8 +37,12 @@ def augmented_delayed_reference(instance, K_local, K_delayed):
     return np.trace(Pis[0][:n, :n]) / scale, grad[:, :n] / scale, grad[:, n:] / scale
 
 
-def assert_bptt_matches_autograd(specs, x0, *, horizon: int, activation: str) -> None:
-    """The hand-written BPTT's loss and four gradients equal autograd's on a stack of ``specs``."""
+def assert_bptt_matches_autograd(specs, x0, *, horizon: int, activation: str, engine: str = "torch") -> None:
+    """The hand-written BPTT's loss and four gradients equal autograd's on a stack of ``specs``.
+
+    ``engine="fused"``: the compiled engine's, whose S gradient exists on the mask only
+    (compared there; off the mask it must be exactly zero).
+    """
     prob = _Problem(specs, torch.float64)
     tensors = [torch.tensor(np.stack([getattr(s, name) for s in specs])) for name in ("S0", "F0", "W0", "G0")]
     x0 = torch.as_tensor(x0, dtype=torch.float64)
@@ -47,9 +51,25 @@ def assert_bptt_matches_autograd(specs, x0, *, horizon: int, activation: str) ->
     leaves = [t.clone().requires_grad_(True) for t in tensors]
     reference = loss_autograd(prob, *leaves, x0, penalty=penalty, beta=beta, horizon=horizon, activation=activation)
     reference.sum().backward()
-    loss, grads = grnn_loss_and_grad(prob, *tensors, x0, penalty=penalty, beta=beta, horizon=horizon,
-                                     activation=activation)
+    references = [leaf.grad for leaf in leaves]
+    if engine == "torch":
+        loss, grads = grnn_loss_and_grad(prob, *tensors, x0, penalty=penalty, beta=beta, horizon=horizon,
+                                         activation=activation)
+    else:
+        from codesign.fused import FusedStack
+
+        mask = np.stack([s.mask for s in specs])
+        arrays = [t.numpy() for t in tensors]
+        stack = FusedStack(*(prob_array.numpy() for prob_array in (prob.A, prob.B, prob.Q, prob.R, prob.P)),
+                           arrays[0], mask, hidden=arrays[2].shape[1], horizon=horizon, batch=x0.shape[1],
+                           dtype=np.float64, squash=activation == "tanh")
+        J, *raw = stack.loss_and_grad(*arrays, np.ascontiguousarray(x0.numpy().transpose(0, 2, 1)))
+        assert np.all(raw[0][~mask] == 0.0)
+        loss, grads = _penalized(torch.from_numpy(J) / x0.shape[1], [torch.from_numpy(g) for g in raw],
+                                 tensors, penalty, beta)
+        on_mask = torch.from_numpy(mask.astype(float))
+        grads[0], references[0] = grads[0] * on_mask, references[0] * on_mask
     np.testing.assert_allclose(loss.numpy(), reference.detach().numpy(), rtol=1e-12)
-    for leaf, grad in zip(leaves, grads):
+    for leaf, grad, expected in zip(leaves, grads, references):
         assert grad.shape == leaf.shape
-        np.testing.assert_allclose(grad.numpy(), leaf.grad.numpy(), rtol=0, atol=1e-11 * leaf.grad.abs().max().item())
+        np.testing.assert_allclose(grad.numpy(), expected.numpy(), rtol=0, atol=1e-11 * expected.abs().max().item())

@@ -45,8 +45,9 @@ def _spec(instance, m, *, mask=None, S0=None, lr=0.02, beta=0.0, penalty=(2.0, 2
     )
 
 
+@pytest.mark.parametrize("engine", ["torch", "fused"])
 @pytest.mark.parametrize("activation", ["tanh", "identity"])
-def test_hand_written_bptt_matches_autograd(inst, unstable, activation):
+def test_hand_written_bptt_matches_autograd(inst, unstable, activation, engine):
     """Loss and all four gradients of the hand-written BPTT equal autograd's, with a general Q, R."""
     rng = np.random.default_rng(0)
     Q = np.diag(rng.uniform(0.5, 2.0, inst.n))
@@ -54,29 +55,31 @@ def test_hand_written_bptt_matches_autograd(inst, unstable, activation):
     specs = [_spec(inst, 0, beta=0.3), _spec(unstable, 1, penalty=(1.0, 0.5, 0.7, 2.0)),
              _spec(custom, 2, S0=rng.random((inst.n, inst.n)), mask=np.ones((inst.n, inst.n), bool))]
     assert_bptt_matches_autograd(specs, rng.standard_normal((3, 6, inst.n)), horizon=inst.horizon,
-                                 activation=activation)
+                                 activation=activation, engine=engine)
 
 
-def test_support_is_respected_exactly(inst):
+@pytest.mark.parametrize("engine", ["torch", "fused"])
+def test_support_is_respected_exactly(inst, engine):
     """Off the mask S stays exactly zero (given support) or exactly at S0 (frozen S)."""
     n = inst.n
     given = _spec(inst, 0)
     frozen = _spec(inst, 1, mask=np.zeros((n, n), bool))
-    results = train_stack([given, frozen], steps=15, curve_every=5)
+    results = train_stack([given, frozen], steps=15, curve_every=5, engine=engine)
     off = inst.comm_adj == 0
     assert np.all(results[0].S[off] == 0.0)
     assert np.any(results[0].S[~off] != inst.gso[~off])  # the support did train
     np.testing.assert_array_equal(results[1].S, inst.gso)
 
 
-def test_stacked_run_equals_single_runs(inst, unstable):
+@pytest.mark.parametrize("engine", ["torch", "fused"])
+def test_stacked_run_equals_single_runs(inst, unstable, engine):
     """A stack of M models gives the parameters of M separate runs with the same seeds."""
     n = inst.n
     specs = [_spec(inst, 0), _spec(unstable, 1, lr=0.03),
              _spec(inst, 2, S0=np.full((n, n), 1.0 / n), mask=np.ones((n, n), bool), beta=0.5)]
-    stacked = train_stack(specs, steps=12, curve_every=4)
+    stacked = train_stack(specs, steps=12, curve_every=4, engine=engine)
     for spec, together in zip(specs, stacked):
-        alone = train_stack([spec], steps=12, curve_every=4)[0]
+        alone = train_stack([spec], steps=12, curve_every=4, engine=engine)[0]
         for name in ("S", "F", "W", "G"):
             np.testing.assert_allclose(getattr(together, name), getattr(alone, name), rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(together.curve_cost, alone.curve_cost, rtol=1e-9)
@@ -95,23 +98,25 @@ def test_l1_stage_sparsifies_more_with_larger_beta(inst):
     assert small[0] < small[1] < small[2], small
 
 
-def test_diverging_model_is_flagged_and_others_continue(inst):
+@pytest.mark.parametrize("engine", ["torch", "fused"])
+def test_diverging_model_is_flagged_and_others_continue(inst, engine):
     """A model whose loss overflows is recorded as diverged; the rest of the stack trains normally."""
     n = inst.n
     wild = Instance.from_matrices(1e4 * np.eye(n), np.eye(n), comm_adj=inst.comm_adj)
     specs = [_spec(inst, 0), _spec(wild, 1), _spec(inst, 2)]
-    results = train_stack(specs, steps=10, curve_every=5)
+    results = train_stack(specs, steps=10, curve_every=5, engine=engine)
     assert [r.status for r in results] == ["ok", "diverged", "ok"]
     assert results[1].diverged_at == 0
-    alone = train_stack([specs[2]], steps=10, curve_every=5)[0]
+    alone = train_stack([specs[2]], steps=10, curve_every=5, engine=engine)[0]
     np.testing.assert_allclose(results[2].S, alone.S, rtol=1e-9, atol=1e-12)
     assert all(np.isfinite(results[0].curve_cost))
 
 
-def test_all_members_diverged_is_a_recorded_status(inst):
+@pytest.mark.parametrize("engine", ["torch", "fused"])
+def test_all_members_diverged_is_a_recorded_status(inst, engine):
     n = inst.n
     wild = Instance.from_matrices(1e4 * np.eye(n), np.eye(n), comm_adj=inst.comm_adj)
-    design = grnn(wild, steps=3, ensemble=2, stability_steps=0)
+    design = grnn(wild, steps=3, ensemble=2, stability_steps=0, engine=engine)
     assert design.status == "diverged" and np.isnan(design.cost)
     assert "diverged" in design.message
 

@@ -5,20 +5,20 @@ product per time step, which leaves two costs no arrangement of torch calls
 removes: the Python overhead of ~40 calls per time step, and dense products with
 S even where the mask makes most of S zero. Here one compiled function runs a
 model's whole forward and backward pass (the same recurrence, the same
-hand-written BPTT) with its tensors in cache, and multiplies by S, A and B as
-sparse matrices whose patterns are fixed for the run: S on its support (the mask
-when S trains, the nonzeros of S0 when it is frozen), A and B on their nonzeros.
+hand-written BPTT) with its tensors in cache, and multiplies by S, A and B on
+sparsity patterns fixed for the run: S on its support (the mask when S trains,
+the nonzeros of S0 when it is frozen), [A B] on its nonzeros; either is taken
+dense where it is more than about half full.
 
 The arithmetic is the torch engine's, reordered: results agree with it to
 rounding, not bit for bit (``tests/test_fused.py``). tanh is evaluated here as
-``(1 - e) / (1 + e)`` with ``e = exp(-2|x|)`` from a Taylor polynomial after
-range reduction, within one unit in the last place of 1 (measured over
-[-30, 30] in the tests), because a call to the C library's tanh per element
-does not vectorize.
+``(s - e) / (s + e)`` from a Taylor polynomial of exp after range reduction,
+within one unit in the last place of 1, because the C library's tanh, called per
+element, does not vectorize.
 
 Layout (one model at a time, all buffers reused): node signals ``(N, B)`` rows,
-hidden states ``(N, h, B)`` so that a node's ``h B`` values are one contiguous
-row for the sparse mixes. Only one state and one input per node.
+hidden states ``(N, h B)`` so that a node's ``h B`` values are one contiguous
+row for the products with S. One state and one input per node only.
 """
 
 from __future__ import annotations
@@ -33,12 +33,27 @@ __all__ = ["FusedStack", "DENSE_S", "DENSE_AB"]
 #: Enter the code fingerprint of every method that trains through this module.
 FINGERPRINT_PACKAGES = ("numba", "llvmlite")
 
+
+class _NoAliasCompiler(numba.core.compiler.CompilerBase):
+    """numba's nopython pipeline with the kernel's array arguments marked noalias.
+
+    Without it LLVM must assume any two arrays may overlap and guards every
+    vectorized loop with run-time overlap checks: 15 % of the kernel's time at
+    these row lengths. The kernel's arguments are distinct allocations
+    (:meth:`FusedStack._run`), which is what noalias promises.
+    """
+
+    def define_pipelines(self):
+        self.state.flags.noalias = True
+        return [numba.core.compiler.DefaultPassBuilder.define_nopython_pipeline(self.state)]
+
+
 # Reassociation lets reductions vectorize; no 'nnan'/'ninf': a diverging model must
 # still produce inf/NaN for the trainer to flag it. error_model="numpy": no
 # zero-division checks, which otherwise keep every loop with a division scalar.
-# Helpers are module-level with their sizes as arguments (numba can cache them to
-# disk); the kernels that call them are compiled per shape with the sizes as
-# constants, and LLVM inlines the helpers and unrolls their short loops.
+# Helpers are module-level with their sizes as arguments, inlined into the kernels,
+# which are compiled per shape with the sizes as constants: LLVM then unrolls the
+# short loops over features and nodes. numba caches all of it on disk.
 _jit = functools.partial(numba.njit, fastmath={"reassoc", "contract", "nsz", "arcp"},
                          error_model="numpy", cache=True)
 _helper = functools.partial(_jit, inline="always")
@@ -65,6 +80,8 @@ def _tanh_constants(dtype):
 
 
 def _make_tanh(int_type, float_type):
+    shift_mask = int_type(8 * np.dtype(int_type).itemsize - 1)
+
     @_helper
     def tanh(z, coef, consts):
         """z = tanh(z) in place (1-d): with y = 2|x| = q ln 2 - r, |r| <= ln 2 / 2 and s = 2^q,
@@ -79,7 +96,8 @@ def _make_tanh(int_type, float_type):
             p = coef[0]
             for c in range(1, coef.size):
                 p = p * r + coef[c]
-            s = float_type(int_type(1) << int_type(q))  # 2^q, exact
+            # 2^q, exact; the mask keeps the shift defined when x is NaN (p is NaN then anyway)
+            s = float_type(int_type(1) << (int_type(q) & shift_mask))
             z[k] = np.copysign((s - p) / (s + p), x)
     return tanh
 
@@ -197,17 +215,17 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
     COEF, CONSTS = _tanh_constants(dt)
     WIDE = dt == np.float64
 
-    @_jit
+    @functools.partial(_jit, pipeline_class=_NoAliasCompiler)
     def kernel(x0, S, s_dense, F, W, G, Q, R, P, q_identity, r_identity, s_ptr, s_cols, s_rows,
                st_ptr, st_cols, st_rows, ab_ptr, ab_cols, ab_vals, abt_ptr, abt_cols, abt_vals, AB,
                ab_dense, g_rows, g_cols, g_count, J, dS, dF, dW, dG,
-               Zs, Zs1, XU, Y, dZ, dY, dPre, lam, tmp, tmp2, s_vals, st_vals, aF, aG, aW):
+               Zs, XU, Y, dZ, dY, dPre, lam, tmp, tmp2, s_vals, st_vals, aF, aG, aW):
         """Summed cost J of every model of the stack and, with ``backward``, its unpenalized
         gradients (dS on the mask only).
 
-        x0 (M, N, B); Zs (T or 2, N, h B) and Zs1, its memory as (T or 2, N h B); XU (T + 1,
-        2N, B): x(t) in rows :N, u(t) in rows N:; Y, dZ, dY, dPre (N, h B); lam, tmp (N, B);
-        tmp2 (2N, B); aF, aG (h, B); aW (h h, B). S is multiplied dense where s_dense[m],
+        x0 (M, N, B); Zs (T or 2, N, h B); XU (T + 1, 2N, B): x(t) in rows :N, u(t) in
+        rows N:; Y, dZ, dY, dPre (N, h B); lam, tmp (N, B); tmp2 (2N, B); aF, aG (h, B);
+        aW (h h, B). S is multiplied dense where s_dense[m],
         else on the padded row patterns s_* (st_*: of S'); [A B] on ab_*, its transpose
         dense (AB) when ab_dense, else on abt_*. g_*: the mask's entries (dS).
         """
@@ -235,9 +253,9 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
                         for b in range(B):
                             zi[l * B + b] += xi[b] * f
                 if squash and WIDE:
-                    _tanh64(Zs1[slot], COEF, CONSTS)
+                    _tanh64(Z.reshape(N * HB), COEF, CONSTS)
                 elif squash:
-                    _tanh32(Zs1[slot], COEF, CONSTS)
+                    _tanh32(Z.reshape(N * HB), COEF, CONSTS)
                 for i in range(N):
                     zi, ui = Z[i], xu[N + i]
                     for b in range(B):
@@ -247,22 +265,27 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
                         ui[b] = acc
                 _sparse_rows(XU[t + 1, :N], xu, ab_ptr[m], ab_cols[m], ab_vals[m], ZERO)
                 x, u = xu[:N], xu[N:]
-                if not q_identity:
-                    _dense_mix(tmp, Q[m], x, False, N, ZERO)
-                for i in range(N):
-                    for b in range(B):
-                        Jm += x[i, b] * (x[i, b] if q_identity else tmp[i, b])
-                if not r_identity:
-                    _dense_mix(tmp, R[m], u, False, N, ZERO)
-                for i in range(N):
-                    for b in range(B):
-                        Jm += u[i, b] * (u[i, b] if r_identity else tmp[i, b])
+                if q_identity and r_identity:  # one flat pass over x(t) and u(t)
+                    flat = xu.reshape(2 * N * B)
+                    for k in range(2 * N * B):
+                        Jm += flat[k] * flat[k]
+                else:
+                    if not q_identity:
+                        _dense_mix(tmp, Q[m], x, False, N, ZERO)
+                    for i in range(N):
+                        for b in range(B):
+                            Jm += x[i, b] * (x[i, b] if q_identity else tmp[i, b])
+                    if not r_identity:
+                        _dense_mix(tmp, R[m], u, False, N, ZERO)
+                    for i in range(N):
+                        for b in range(B):
+                            Jm += u[i, b] * (u[i, b] if r_identity else tmp[i, b])
             xT = XU[T, :N]
             _dense_mix(lam, P[m], xT, False, N, ZERO)
-            for i in range(N):
-                for b in range(B):
-                    Jm += xT[i, b] * lam[i, b]
-                    lam[i, b] *= C2  # dJ/dx(T) / B
+            lam_flat, xT_flat = lam.reshape(N * B), XU[T].reshape(2 * N * B)
+            for k in range(N * B):
+                Jm += xT_flat[k] * lam_flat[k]
+                lam_flat[k] *= C2  # dJ/dx(T) / B
             J[m] = Jm
             if not backward:
                 continue
@@ -281,12 +304,16 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
                     _dense_transposed(tmp2, AB[m], lam, N, B, ZERO)
                 else:
                     _sparse_rows(tmp2, lam, abt_ptr[m], abt_cols[m], abt_vals[m], ZERO)
-                if not r_identity:
+                if r_identity:  # du = B' lam + c2 R u (flat: one long loop)
+                    du_flat, u_flat = tmp2.reshape(2 * N * B), xu.reshape(2 * N * B)
+                    for k in range(N * B, 2 * N * B):
+                        du_flat[k] += C2 * u_flat[k]
+                else:
                     _dense_mix(tmp, R[m], xu[N:], False, N, ZERO)
-                for i in range(N):  # du = B' lam + c2 R u
-                    di, ui, ti = tmp2[N + i], xu[N + i], tmp[i]
-                    for b in range(B):
-                        di[b] += C2 * (ui[b] if r_identity else ti[b])
+                    for i in range(N):
+                        di, ti = tmp2[N + i], tmp[i]
+                        for b in range(B):
+                            di[b] += C2 * ti[b]
                 for i in range(N):  # dPre = (G du + dZ) * tanh'; dG, dF summed per (l, b)
                     zi, dzi, pi, di, xi = Zn[i], dZ[i], dPre[i], tmp2[N + i], xu[i]
                     for l in range(h):
@@ -426,11 +453,15 @@ class FusedStack:
                           tmp2=(2 * N, batch), s_vals=self.s_cols.shape[1], st_vals=self.st_cols.shape[1],
                           aF=(h, batch), aG=(h, batch), aW=(h * h, batch))
             work = {name: np.zeros(shape, dt) for name, shape in shapes.items()}
-            work["Zs1"] = work["Zs"].reshape(work["Zs"].shape[0], -1)
             self._buffers[key] = work
         return self._buffers[key]
 
     def _run(self, x0, S, F, W, G, backward: bool):
+        # The kernel's arguments must be distinct C-contiguous arrays of one dtype (noalias).
+        for name, a in (("x0", x0), ("S", S), ("F", F), ("W", W), ("G", G)):
+            if a.dtype != self.dtype or not a.flags.c_contiguous:
+                raise ValueError(f"{name} must be a C-contiguous {np.dtype(self.dtype).name} array, "
+                                 f"got {a.dtype} (contiguous: {a.flags.c_contiguous})")
         M, _, batch = x0.shape
         kernel = _kernel(self.N, batch, self.h, self.T, self.squash, np.dtype(self.dtype).name, backward)
         J = np.empty(M, self.dtype)
@@ -439,7 +470,7 @@ class FusedStack:
         kernel(x0, S, self.s_dense, F, W, G, self.Q, self.R, self.P, self.q_identity, self.r_identity,
                self.s_ptr, self.s_cols, self.s_rows, self.st_ptr, self.st_cols, self.st_rows,
                *self.ab, *self.abt, self.AB, self.ab_dense, self.g_rows, self.g_cols, self.g_count,
-               J, *grads, w["Zs"], w["Zs1"], w["XU"], w["Y"], w["dZ"], w["dY"], w["dPre"],
+               J, *grads, w["Zs"], w["XU"], w["Y"], w["dZ"], w["dY"], w["dPre"],
                w["lam"], w["tmp"], w["tmp2"], w["s_vals"], w["st_vals"], w["aF"], w["aG"], w["aW"])
         return J, grads
 

@@ -599,10 +599,10 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
         ``bounded`` is then whether its closed loop's spectral radius is below 1).
     engine : {"torch", "fused", "auto"}
         How the loss and its gradient are computed: one torch call per product
-        and time step, or one compiled pass per model (numba), 1.3-3.5x as fast,
+        and time step, or one compiled pass per model (numba), 2-3x as fast,
         needing one state and one input per node; "auto" takes "fused" where it
-        applies. The engines agree to rounding at every step, but a 750-step run
-        on an unstable plant can amplify that to ~1e-4 in the final cost.
+        applies. The engines agree to rounding at every step; over a 750-step
+        run that can grow to 1e-4 or so in the final cost.
 
     Returns
     -------

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -539,8 +540,9 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
          steps: int = 750, batch: int = 20, hidden: int = 5, lr: float = 0.02, l1_lr: float = 0.03,
          clip: float = 10.0, frob: float = 2.0, ensemble: int = 2, refine_ensemble: int = 1,
          threshold: float = 4e-3, curve_every: int = 10, curve_size: int = 100,
-         dtype: str = "float64", stability_steps: int = 500, stability_size: int = 100,
-         activation: str = "tanh", engine: str = "torch") -> Design:
+         dtype: Literal["float64", "float32"] = "float64", stability_steps: int = 500,
+         stability_size: int = 100, activation: Literal["tanh", "identity"] = "tanh",
+         engine: Literal["torch", "fused", "auto"] = "torch") -> Design:
     """Train a GRNN distributed controller on ``instance`` (paper Sec. III).
 
     Parameters
@@ -587,7 +589,7 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
     curve_size : int
         Draws of the selection set (training curve and ensemble selection), apart from the validation set.
     dtype : {"float64", "float32"}
-        Training precision; float32 is 1.3-3x as fast (docs/performance.md).
+        Training precision; float32 is 1.5-2x as fast (docs/performance.md).
     stability_steps : int
         Length of the boundedness check rollout (0 skips it).
     stability_size : int

@@ -107,6 +107,8 @@ def _cli(*args, cwd=None):
         (SPEC.replace("seeds = 2", "seeds = 2\nfoo = 1"), "instances.foo: unknown key"),
         (SPEC.replace("seeds = 2", "seeds = 'x'"), "instances.seeds: expected list"),
         (SPEC.replace('method = "lqr"', 'method = "lqr"\nparams = { gamma = 2 }'), "params.gamma: unknown hyperparameter"),
+        (SPEC.replace('method = "lqr"', 'method = "grnn"\nparams = { engine = "gpu" }'),
+         "params.engine: expected 'torch' or 'fused' or 'auto', got str 'gpu'"),
         ("this is [not toml", "not valid TOML"),
     ],
 )

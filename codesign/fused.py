@@ -28,6 +28,8 @@ import functools
 import numba
 import numpy as np
 
+from .training import FUSED_DENSE_NODES, FUSED_DENSE_S
+
 __all__ = ["FusedStack", "DENSE_S", "DENSE_AB"]
 
 #: Enter the code fingerprint of every method that trains through this module.
@@ -58,8 +60,9 @@ _jit = functools.partial(numba.njit, fastmath={"reassoc", "contract", "nsz", "ar
                          error_model="numpy", cache=True)
 _helper = functools.partial(_jit, inline="always")
 
-#: Fractions of nonzeros above which products with S, and with [A B]', are taken dense.
-DENSE_S, DENSE_AB = 0.5, 0.4
+#: Fractions of nonzeros above which products with S, and with [A B]', are taken dense
+#: (S only up to FUSED_DENSE_NODES nodes, where the loops over nodes unroll).
+DENSE_S, DENSE_AB = FUSED_DENSE_S, 0.4
 
 
 def _tanh_constants(dtype):
@@ -419,7 +422,7 @@ class FusedStack:
         trainable = mask.any(axis=(1, 2))
         support = np.where(trainable[:, None, None], mask, S0 != 0)
         # Dense products beat the pattern above about half full (and unroll only for small N).
-        self.s_dense = (support.mean(axis=(1, 2)) > DENSE_S) & (N <= 32)
+        self.s_dense = (support.mean(axis=(1, 2)) > DENSE_S) & (N <= FUSED_DENSE_NODES)
         self.s_ptr, self.s_cols, self.s_rows = _padded_rows(support)
         self.st_ptr, self.st_cols, self.st_rows = _padded_rows(support.transpose(0, 2, 1))
         AB = np.concatenate([A, B], axis=2).astype(dt)

@@ -603,7 +603,7 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
         How the loss and its gradient are computed: one torch call per product
         and time step, or one compiled pass per model (numba), 2-3x as fast,
         needing one state and one input per node; "auto" takes "fused" where it
-        applies. The engines agree to rounding at every step; over a 750-step
+        applies and is faster (not for an S over half full at more than 32 nodes). The engines agree to rounding at every step; over a 750-step
         run that can grow to 1e-4 or so in the final cost.
 
     Returns

@@ -60,7 +60,7 @@ DTYPES = ("float32", "float64")
 ACTIVATIONS = ("tanh", "identity")
 #: How a stack's loss and gradient are computed: one torch call per product and time step
 #: (any node layout), or one compiled pass per model (:mod:`codesign.fused`, numba; one state
-#: and one input per node); "auto" takes "fused" where it applies.
+#: and one input per node); "auto" takes "fused" where it applies and is faster (resolve_engine).
 ENGINES = ("auto", "torch", "fused")
 
 
@@ -69,8 +69,20 @@ def _check_activation(activation: str) -> None:
         raise ValueError(f"activation must be one of {ACTIVATIONS}, got {activation!r}")
 
 
-def resolve_engine(engine: str, states_per_node: int = 1, inputs_per_node: int = 1) -> str:
-    """The engine that runs: ``engine`` itself, or for "auto" "fused" where it applies, else "torch"."""
+#: The fused engine multiplies by S dense where its support is more than this full, and only
+#: up to this many nodes (its loops over nodes unroll); beyond, a full S makes it slower than
+#: torch's batched products (docs/performance.md), so "auto" leaves such stacks to torch.
+FUSED_DENSE_S, FUSED_DENSE_NODES = 0.5, 32
+
+
+def resolve_engine(engine: str, states_per_node: int = 1, inputs_per_node: int = 1,
+                   nodes: int = 0, support_density: float = 0.0) -> str:
+    """The engine that runs: ``engine`` itself, or for "auto" the faster one that applies.
+
+    "auto" takes "fused" with one state and one input per node, unless the stack has
+    more than ``FUSED_DENSE_NODES`` nodes and an S support (``support_density``, its
+    largest fraction of nonzeros) more than ``FUSED_DENSE_S`` full.
+    """
     if engine not in ENGINES:
         raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
     scalar = states_per_node == inputs_per_node == 1
@@ -78,7 +90,8 @@ def resolve_engine(engine: str, states_per_node: int = 1, inputs_per_node: int =
         raise ValueError(f"engine 'fused' needs one state and one input per node, this stack has "
                          f"{states_per_node} and {inputs_per_node}; use engine 'torch' or 'auto'")
     if engine == "auto":
-        return "fused" if scalar else "torch"
+        dense_and_large = nodes > FUSED_DENSE_NODES and support_density > FUSED_DENSE_S
+        return "fused" if scalar and not dense_and_large else "torch"
     return engine
 
 
@@ -558,7 +571,8 @@ def train_stack(
     N = specs[0].S0.shape[0]
     prob = _Problem(specs, tdt)
     _, p, q = _node_sizes(prob, N)
-    engine = resolve_engine(engine, p, q)
+    supports = [s.mask if s.mask.any() else s.S0 != 0 for s in specs]
+    engine = resolve_engine(engine, p, q, nodes=N, support_density=max(np.mean(m) for m in supports))
     padded = p * N
     placements = [np.arange(padded) if s.state_index is None else np.asarray(s.state_index) for s in specs]
     if len({len(k) for k in placements}) != 1:

@@ -109,6 +109,10 @@ def test_engine_resolution_and_bad_engines():
     assert resolve_engine("auto", 1, 1) == "fused"
     assert resolve_engine("auto", 2, 1) == "torch"
     assert resolve_engine("torch", 3, 2) == "torch"
+    assert resolve_engine("auto", 1, 1, nodes=100, support_density=1.0) == "torch"  # slower there
+    assert resolve_engine("auto", 1, 1, nodes=100, support_density=0.1) == "fused"
+    assert resolve_engine("auto", 1, 1, nodes=20, support_density=1.0) == "fused"
+    assert resolve_engine("fused", 1, 1, nodes=100, support_density=1.0) == "fused"
     with pytest.raises(ValueError, match="one state and one input per node"):
         resolve_engine("fused", 2, 1)
     with pytest.raises(ValueError, match="engine must be one of"):

@@ -28,7 +28,7 @@ import functools
 import numba
 import numpy as np
 
-from .training import FUSED_DENSE_NODES, FUSED_DENSE_S
+from .training import FUSED_DENSE_NODES, FUSED_DENSE_S, s_supports
 
 __all__ = ["FusedStack", "DENSE_S", "DENSE_AB"]
 
@@ -213,7 +213,7 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
     products. ``backward`` False: costs only, keeping two hidden states instead of T.
     """
     dt = np.dtype(dtype_name).type
-    HB, KEEP = h * B, backward
+    HB = h * B
     ZERO, C2 = dt(0.0), dt(2.0 / B)
     COEF, CONSTS = _tanh_constants(dt)
     WIDE = dt == np.float64
@@ -239,10 +239,10 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
             Jm = ZERO
             for t in range(T):  # forward
                 xu = XU[t]
-                slot = t if KEEP else t % 2
+                slot = t if backward else t % 2
                 Z = Zs[slot]
                 if t > 0:
-                    _feature_mix(Y, Zs[t - 1] if KEEP else Zs[1 - slot], Wm, False, N, h, B, ZERO)
+                    _feature_mix(Y, Zs[t - 1] if backward else Zs[1 - slot], Wm, False, N, h, B, ZERO)
                     if s_dense[m]:
                         _dense_mix(Z, Sm, Y, False, N, ZERO)
                     else:
@@ -420,7 +420,7 @@ class FusedStack:
         dt = np.dtype(dtype).type
         self.dtype, self.N, self.h, self.T, self.squash = dt, N, hidden, horizon, bool(squash)
         trainable = mask.any(axis=(1, 2))
-        support = np.where(trainable[:, None, None], mask, S0 != 0)
+        support = s_supports(S0, mask)
         # Dense products beat the pattern above about half full (and unroll only for small N).
         self.s_dense = (support.mean(axis=(1, 2)) > DENSE_S) & (N <= FUSED_DENSE_NODES)
         self.s_ptr, self.s_cols, self.s_rows = _padded_rows(support)

@@ -27,7 +27,7 @@ from .evaluation import (exact_cost, impulse_responses, simulate, simulate_to_pr
                          validation_set)
 from .methods import method
 from ._lazy import lazy_import
-from .training import ACTIVATIONS, DTYPES, ENGINES, ModelSpec, _tanh_, init_fwg, train_stack
+from .training import ACTIVATIONS, DTYPES, ModelSpec, _tanh_, init_fwg, resolve_engine, train_stack
 
 torch = lazy_import("torch")
 
@@ -262,11 +262,8 @@ def _check_job(instance, variant, beta, seed, settings) -> dict:
         raise ValueError(f"dtype must be one of {sorted(DTYPES)}, got {s['dtype']!r}")
     if s["activation"] not in ACTIVATIONS:
         raise ValueError(f"activation must be one of {ACTIVATIONS}, got {s['activation']!r}")
-    if s["engine"] not in ENGINES:
-        raise ValueError(f"engine must be one of {ENGINES}, got {s['engine']!r}")
-    if s["engine"] == "fused" and not instance.scalar_nodes:
-        raise ValueError("engine 'fused' needs one state and one input per node; this instance has nodes "
-                         "with several (use engine 'torch' or 'auto')")
+    resolve_engine(s["engine"], _slot_index(instance.state_nodes, instance.nodes)[1],
+                   _slot_index(instance.input_nodes, instance.nodes)[1])  # fails now, not after training
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     return s
@@ -377,7 +374,8 @@ def _train_groups(specs_by_job: list[list[ModelSpec]], jobs: list[_Job], stack_s
     for j, (job, specs) in enumerate(zip(jobs, specs_by_job)):
         s = job.settings
         key = (s["steps"], s["batch"], job.instance.horizon, s["clip"], s["curve_every"], s["dtype"],
-               s["activation"], s["engine"], s["hidden"], s["curve_size"], job.instance.n, job.instance.m, job.instance.nodes,
+               s["activation"], s["engine"], s["hidden"], s["curve_size"], job.instance.n, job.instance.m,
+               job.instance.nodes,
                _slot_index(job.instance.state_nodes, job.instance.nodes)[1],
                _slot_index(job.instance.input_nodes, job.instance.nodes)[1])
         groups.setdefault(key, []).extend((j, k) for k in range(len(specs)))
@@ -603,8 +601,9 @@ def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: i
         How the loss and its gradient are computed: one torch call per product
         and time step, or one compiled pass per model (numba), 2-3x as fast,
         needing one state and one input per node; "auto" takes "fused" where it
-        applies and is faster (not for an S over half full at more than 32 nodes). The engines agree to rounding at every step; over a 750-step
-        run that can grow to 1e-4 or so in the final cost.
+        applies and is faster (not for an S over half full at more than 32
+        nodes). The engines agree to rounding at every step; over a 750-step run
+        that can grow to 1e-4 or so in the final cost.
 
     Returns
     -------

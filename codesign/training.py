@@ -75,6 +75,12 @@ def _check_activation(activation: str) -> None:
 FUSED_DENSE_S, FUSED_DENSE_NODES = 0.5, 32
 
 
+def s_supports(S0: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Where each model's S can be nonzero, (M, N, N): its mask, or the nonzeros of S0 if S is frozen."""
+    trainable = mask.any(axis=(1, 2))
+    return np.where(trainable[:, None, None], mask, S0 != 0)
+
+
 def resolve_engine(engine: str, states_per_node: int = 1, inputs_per_node: int = 1,
                    nodes: int = 0, support_density: float = 0.0) -> str:
     """The engine that runs: ``engine`` itself, or for "auto" the faster one that applies.
@@ -571,8 +577,9 @@ def train_stack(
     N = specs[0].S0.shape[0]
     prob = _Problem(specs, tdt)
     _, p, q = _node_sizes(prob, N)
-    supports = [s.mask if s.mask.any() else s.S0 != 0 for s in specs]
-    engine = resolve_engine(engine, p, q, nodes=N, support_density=max(np.mean(m) for m in supports))
+    supports = s_supports(np.stack([s.S0 for s in specs]),
+                          np.stack([np.asarray(s.mask, dtype=bool) for s in specs]))
+    engine = resolve_engine(engine, p, q, nodes=N, support_density=supports.mean(axis=(1, 2)).max())
     padded = p * N
     placements = [np.arange(padded) if s.state_index is None else np.asarray(s.state_index) for s in specs]
     if len({len(k) for k in placements}) != 1:

@@ -86,17 +86,42 @@ class _RunCommand(click.Command):
             formatter.write_dl(rows)
 
 
-def _write_report(store, out: Path) -> dict:
+def _report(records, out: Path, *, meta: dict, members: dict, superseded: int, load_controller,
+            software: dict | None = None) -> dict:
+    """Write the report of ``records`` into ``out``: titles, specs and commands come from ``meta``."""
     from .report import write_report
 
-    meta = store.meta()
     specs = {k.split(":", 1)[1]: v for k, v in meta.items() if k.startswith("spec:")}
     commands = [v for k, v in sorted(meta.items()) if k.startswith("command:")]
     commands.append(f"compare report --out {out}")
     title = "Comparison report: " + ", ".join(sorted(specs)) if specs else "Comparison report"
-    return write_report(store.records(), out, specs=specs, title=title, commands=commands,
-                        load_controller=store.controller, meta=meta, members=store.members(),
-                        superseded=store.superseded())
+    # Versions are passed only when rebuilding: a report from the store prints the installed ones.
+    versions = {} if software is None else {"software": software}
+    return write_report(records, out, specs=specs, title=title, commands=commands, load_controller=load_controller,
+                        meta=meta, members=members, superseded=superseded, **versions)
+
+
+def _write_report(store, out: Path) -> dict:
+    """The report of everything current in ``store``."""
+    return _report(store.records(), out, meta=store.meta(), members=store.members(), superseded=store.superseded(),
+                   load_controller=store.controller)
+
+
+def _write_report_from_folder(data, out: Path) -> dict:
+    """The report of a :class:`compare.folder.FolderData`, with the software versions it recorded."""
+    return _report(data.records, out, meta=data.meta, members=data.members, superseded=data.superseded,
+                   load_controller=data.load_controller, software=data.software)
+
+
+def _rebuild_from_folder(out: Path) -> dict:
+    """Rebuild the report of a folder from its runs.csv, curves.csv and report.json; bad files exit 2."""
+    from .folder import FolderError, read_folder
+
+    try:
+        data = read_folder(out)
+    except FolderError as exc:
+        raise UserError(str(exc)) from None
+    return _write_report_from_folder(data, out)
 
 
 _PLUGIN_HELP = ("Import a module (by name) or a .py file that registers methods with "
@@ -175,13 +200,24 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
 @click.option("--store", "store_path", type=click.Path(path_type=Path), default=None, metavar="FILE",
               help="Result store file (default: <out>/results.sqlite).")
 def report(out, store_path):
-    """Regenerate the report from the result store alone."""
+    """Regenerate the report from the result store alone.
+
+    Without a store (none in the folder and no --store), a folder holding runs.csv and
+    report.json, as every report since they were added does, is rebuilt from those.
+    """
     _check_folder(out)
     if store_path is not None:
         _check_file(store_path)
     path = _store_path(out, store_path)
+    folder_files = any((out / name).is_file() for name in ("runs.csv", "report.json"))
+    if not path.is_file() and store_path is None and folder_files:
+        files = _rebuild_from_folder(out)
+        click.echo("rebuilt from the folder's runs.csv and report.json (no result store)")
+        click.echo(f"report: {files['md']}")
+        return
     if not path.is_file():
-        raise UserError(f"no result store at {path}; run `compare run` first or pass --store")
+        rebuild = "" if store_path is not None else f" and no runs.csv or report.json in {out} to rebuild from"
+        raise UserError(f"no result store at {path}{rebuild}; run `compare run` first or pass --store")
     with _open_store(path) as store:
         if len(store) == 0:
             raise UserError(f"the store {path} holds no runs")

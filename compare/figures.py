@@ -1,13 +1,17 @@
 """Figure conventions shared by the report's figures, and the budget-front figure.
 
-Each method (label) gets a colour and a marker shape, so that twenty methods stay
-distinguishable; the information model is the line style. Cost axes are linear
-unless the costs span more than a decade.
+Every method is drawn in its own colour and marker (:mod:`compare.styles`, the same
+in every figure of every report) and with its information model's line style.
+Costs are shown as *excess cost* J/J_LQR − 1 on a log axis, in percent, so that a
+design 0.1 % above centralized LQR and one 30 % above it are both readable (lqrsp
+plots its percent performance loss the same way); centralized LQR is the 0 % the
+axis is measured from, and designs within :data:`FLOOR` of it sit on the bottom edge.
 """
 
 from __future__ import annotations
 
 import textwrap
+import warnings
 
 import matplotlib
 
@@ -15,70 +19,137 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter  # noqa: E402
+from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter  # noqa: E402
 
 from .statistics import panel_title  # noqa: E402
+from .styles import BOUND_COLOUR, INFO_MODELS, INFO_ORDER, Style, label_styles  # noqa: E402
 
-__all__ = ["LINESTYLES", "label_styles", "cost_axis", "plot_budget_fronts", "OFF_SCALE", "legend_handles"]
+__all__ = ["LINESTYLES", "OFF_SCALE", "FLOOR", "excess", "excess_axis", "panel_grid", "panel_heading",
+           "legend_handles", "finish_legend", "draw_boundary", "plot_budget_fronts", "label_styles", "method_gid",
+           "drawn_styles"]
 
-#: Line style per information model.
-LINESTYLES = {
-    "instantaneous": ("-", "instantaneous (zero-delay links)"),
-    "delayed": ("--", "delayed (one step per hop)"),
-    "none": (":", "no communication"),
-}
+#: Line style and description per information model (from :data:`compare.styles.INFO_MODELS`).
+LINESTYLES = {info: (style, text) for info, (style, _, text) in INFO_MODELS.items()}
 #: Costs above this many times centralized LQR's are off the interesting range:
 #: the axis stops there and the figure says which methods lie above.
 OFF_SCALE = 2.0
-_MARKERS = ("o", "s", "D", "^", "v", "P", "X", "<", ">", "h", "*", "p")
+#: Excess costs below this (0.1 %) are drawn on the axis' bottom edge: that close to LQR.
+FLOOR = 1e-3
 
 
-def label_styles(labels) -> dict:
-    """Label -> (colour, marker): tab10 then Dark2 (18 hues), and a marker cycle of another length."""
-    palette = list(plt.get_cmap("tab10").colors) + list(plt.get_cmap("Dark2").colors)
-    return {label: (palette[i % len(palette)], _MARKERS[i % len(_MARKERS)]) for i, label in enumerate(labels)}
+def excess(cost):
+    """J/J_LQR − 1 for display: floored at :data:`FLOOR` (LQR itself is 0) and inf kept inf."""
+    return np.maximum(np.asarray(cost, dtype=float) - 1.0, FLOOR)
 
 
-def cost_axis(ax, low: float, high: float) -> None:
-    """Cost y-axis on [low, high]: linear with several ticks, or log with labelled ticks beyond a decade."""
-    plain = FuncFormatter(lambda value, _: f"{value:g}")
-    if high / max(low, 1e-12) > 10:
-        ax.set_yscale("log")
-        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-        ax.yaxis.set_major_formatter(plain)
-        ax.yaxis.set_minor_formatter(NullFormatter())
-    else:
-        ax.yaxis.set_major_locator(MaxNLocator(nbins=7))
+def _percent(value, _=None) -> str:
+    text = f"{value * 100:.4g}"
+    return f"{text} %"
+
+
+def excess_axis(ax, low: float, high: float) -> None:
+    """Log y-axis of excess cost on [low, high] (fractions), labelled in percent."""
+    low, high = max(low, FLOOR), max(high, FLOOR * 10)
+    ax.set_yscale("log")
+    decades = np.log10(high / low)
+    ax.yaxis.set_major_locator(LogLocator(subs=(1.0,) if decades > 3.2 else (1.0, 2.0, 5.0)))
+    ax.yaxis.set_major_formatter(FuncFormatter(_percent))
+    ax.yaxis.set_minor_formatter(NullFormatter())
     ax.set_ylim(low, high)
 
 
-def legend_handles(styles: dict, labels, info_models) -> list:
-    handles = [Line2D([], [], color=styles[lb][0], marker=styles[lb][1], linestyle="-", label=lb) for lb in labels]
-    handles += [Line2D([], [], color="0.3", linestyle=LINESTYLES[i][0], label=LINESTYLES[i][1])
-                for i in LINESTYLES if i in info_models]
+def method_gid(label: str) -> str:
+    """The gid set on every artist drawn for a method, so that tests and tools can find what was drawn."""
+    return f"method:{label}"
+
+
+def drawn_styles(fig) -> dict[str, set]:
+    """Label -> the (colour, marker) pairs of the markers drawn for it in ``fig`` (read back from its artists)."""
+    from matplotlib.colors import to_hex
+
+    out: dict[str, set] = {}
+    for ax in fig.axes:
+        for artist in list(ax.lines) + list(ax.collections):
+            gid = artist.get_gid() or ""
+            if not gid.startswith("method:"):
+                continue
+            if isinstance(artist, Line2D):
+                if artist.get_marker() in (None, "None", "none", ""):
+                    continue
+                out.setdefault(gid[7:], set()).add((to_hex(artist.get_color()), artist.get_marker()))
+    return out
+
+
+def panel_heading(panel: tuple, instances: int | None = None) -> str:
+    return panel_title(panel) + (f" · {instances} instances" if instances else "")
+
+
+def panel_grid(panels, *, width: float = 4.6, height: float = 3.9):
+    """Axes for the panels: rows = N and columns = ‖A‖₂ when both vary (shared y), else up to 3 columns.
+
+    Returns ``fig, axes`` (panel -> Axes); the legend goes to the right of the panels (:func:`finish_legend`).
+    """
+    panels = sorted(panels)
+    sizes = sorted({p[1] for p in panels})
+    norms = sorted({p[2] for p in panels if p[2] is not None})
+    if len(sizes) > 1 and len(norms) > 1 and all(p[2] is not None for p in panels):
+        fig, grid = plt.subplots(len(sizes), len(norms), figsize=(width * len(norms), height * len(sizes)),
+                                 squeeze=False, sharey=True)
+        axes = {}
+        for i, n in enumerate(sizes):
+            for j, a in enumerate(norms):
+                panel = next((p for p in panels if p[1] == n and p[2] == a), None)
+                if panel is None:
+                    grid[i, j].set_axis_off()
+                else:
+                    axes[panel] = grid[i, j]
+        return fig, axes
+    ncols = min(3, max(1, len(panels)))
+    nrows = -(-max(1, len(panels)) // ncols)
+    fig, grid = plt.subplots(nrows, ncols, squeeze=False, figsize=(width * ncols, height * nrows))
+    flat = [grid[i, j] for i in range(nrows) for j in range(ncols)]
+    for extra in flat[len(panels):]:
+        extra.set_axis_off()
+    return fig, dict(zip(panels, flat))
+
+
+def legend_handles(styles: dict, labels, info_models=None, *, counts: dict | None = None) -> list:
+    """Legend entries grouped by information model: a heading per model, then its methods in its line style.
+
+    ``counts``: label -> text appended to the entry (e.g. "2 of 3 instances").
+    """
+    handles = []
+    for info in INFO_ORDER:
+        mine = [lb for lb in labels if _style(styles, lb).info_model == info]
+        if not mine:
+            continue
+        handles.append(Line2D([], [], linestyle="none", label=INFO_MODELS[info][2] + ":"))
+        for lb in mine:
+            s = _style(styles, lb)
+            extra = f" ({counts[lb]})" if counts and lb in counts else ""
+            handles.append(Line2D([], [], color=s.colour, marker=s.marker, linestyle=s.linestyle, linewidth=1.4,
+                                  markersize=6, markerfacecolor=getattr(s, "face", s.colour), label=f"{lb}{extra}"))
     return handles
 
 
-def _grid(panels: int):
-    ncols = min(3, max(1, panels))
-    nrows = -(-max(1, panels) // ncols)
-    fig, grid = plt.subplots(nrows, ncols, figsize=(6.0 * ncols, 4.8 * nrows), squeeze=False)
-    axes = list(grid.ravel())
-    for extra in axes[max(1, panels):]:
-        extra.set_axis_off()
-    spare = axes[-1] if len(axes) > panels else None
-    return fig, axes[:max(1, panels)], spare
+def _style(styles: dict, label: str) -> Style:
+    s = styles[label]
+    return s if isinstance(s, Style) else Style(s[0], s[1])
 
 
-def finish_legend(fig, axes, spare, handles) -> None:
-    if spare is not None:
-        spare.legend(handles=handles, loc="center", ncol=1 if len(handles) <= 16 else 2, frameon=False)
+def finish_legend(fig, handles, *, title: str | None = None) -> None:
+    """Lay the panels out, then the legend to their right; headings (entries without a line) in bold.
+
+    The saved figure's tight bounding box takes the legend in.
+    """
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Tight layout not applied")
         fig.tight_layout()
-        return
-    ncol = min(4, len(handles))
-    rows = -(-len(handles) // ncol)
-    fig.legend(handles=handles, loc="lower center", ncol=ncol, frameon=False, bbox_to_anchor=(0.5, 0.0))
-    fig.tight_layout(rect=(0, min(0.5, (0.25 * rows + 0.2) / fig.get_figheight()), 1, 1))
+    legend = fig.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 0.98), frameon=False, fontsize=8.5,
+                        title=title, title_fontsize=9, handlelength=2.6, alignment="left")
+    for handle, text in zip(legend.legend_handles, legend.get_texts()):
+        if handle.get_linestyle() in ("None", "none") and handle.get_marker() in ("None", "none", None, ""):
+            text.set_fontweight("bold")
 
 
 def draw_boundary(ax, x: float, *, below: float = 0.0) -> None:
@@ -87,23 +158,36 @@ def draw_boundary(ax, x: float, *, below: float = 0.0) -> None:
     The label starts ``below`` points under the top edge (clear of off-scale labels there).
     """
     ax.axvline(x, color="0.35", linestyle=(0, (1, 2)), linewidth=1.0, zorder=0)
-    ax.annotate(" plant graph (QI boundary) ", (x, 1.0), xycoords=ax.get_xaxis_transform(),
+    ax.annotate(" QI boundary ", (x, 1.0), xycoords=ax.get_xaxis_transform(),
                 xytext=(-1, -4 - below), textcoords="offset points", rotation=90, ha="right", va="top",
                 fontsize=7, color="0.35", zorder=1,  # under the markers: SLS on the plant graph sits on this line
                 bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1})
+
+
+def links_axis(ax, right: float, *, per_node: bool = False) -> None:
+    """Symmetric-log x axis of links from 0 to ``right``."""
+    ax.set_xscale("symlog", linthresh=1.0 if not per_node else 0.1)
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    ax.set_xlim(-0.04 if per_node else -0.4, right * 1.15 + (0.1 if per_node else 1))
 
 
 def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundaries: dict | None = None,
                        bounds: dict | None = None):
     """Best cost within each link budget: median over instances (step curve) and 25–75 % band.
 
+    A front starts at the budget where every instance with a design of the method has
+    one (:attr:`compare.statistics.Front.start`), marked by the method's marker; the
+    band spans the 25–75 % quantiles over those instances (spread across instances,
+    not uncertainty of the median). Costs are excess costs over centralized LQR on a
+    log axis (:func:`excess_axis`).
+
     Parameters
     ----------
     fronts : list of :class:`compare.statistics.Front`
-    axes : sequence of matplotlib Axes, optional
-        One per panel; a new figure is made if omitted.
+    axes : dict, optional
+        Panel -> Axes; a new figure is made if omitted.
     styles : dict, optional
-        Label -> (colour, marker), from :func:`label_styles`.
+        Label -> :class:`compare.styles.Style`.
     boundaries : dict, optional
         Panel -> plant-graph link count, drawn when a delayed method is present.
     bounds : dict, optional
@@ -115,57 +199,66 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
     """
     panels = sorted({f.panel for f in fronts})
     labels = sorted({f.label for f in fronts})
-    styles = styles or label_styles(labels)
-    spare = None
-    if axes is None:
-        fig, axes, spare = _grid(len(panels))
+    styles = styles or {f.label: Style("#333333", "o", f.info_model) for f in fronts}
+    own = axes is None
+    if own:
+        fig, axes = panel_grid(panels)
     else:
-        fig = axes[0].figure
-    above = {}
-    for ax, panel in zip(axes, panels):
+        fig = next(iter(axes.values())).figure
+    per_node = len({p[1] for p in panels}) > 1
+    above, partial = {}, {}
+    for panel in panels:
+        ax = axes[panel]
         mine = [f for f in fronts if f.panel == panel]
-        right = max(float(f.budgets[-1]) for f in mine)
+        scale = panel[1] if per_node else 1.0
+        right = max(float(f.budgets[-1]) for f in mine) / scale
         finite = np.concatenate([f.cost[1][np.isfinite(f.cost[1])] for f in mine])
         if finite.size == 0:
             continue
         if bounds and panel in bounds:
             finite = np.append(finite, bounds[panel][0])
-        low = min(0.97, float(finite.min()) * 0.98)
         shown = finite[finite <= OFF_SCALE]
-        top = float(finite.max()) * 1.03 if shown.size == finite.size else min(OFF_SCALE, float(shown.max())) * 1.05
+        top = (float(shown.max()) if shown.size else OFF_SCALE) - 1.0
+        low = float(excess(shown.min() if shown.size else OFF_SCALE))
         for f in mine:
-            colour, marker = styles[f.label]
-            x = np.append(f.budgets, max(right, f.budgets[-1]) * 1.15 + 1)
+            s = _style(styles, f.label)
+            x = np.append(f.budgets, max(right * scale, f.budgets[-1]) * 1.15 + 1) / scale
             q1, med, q3 = (np.append(row, row[-1]) for row in f.cost)
-            linestyle = LINESTYLES.get(f.info_model, ("-", ""))[0]
-            # inf (the budget fits too few instances' designs) leaves a gap, not a line off the axis.
-            q1, med, q3 = (np.where(np.isfinite(v), v, np.nan) for v in (q1, med, q3))
-            ax.step(x, med, where="post", color=colour, linestyle=linestyle, linewidth=1.5)
-            ax.fill_between(x, q1, q3, step="post", color=colour, alpha=0.08, linewidth=0)
-            reached = np.isfinite(f.cost[1])
-            if reached.any():
-                k = int(np.argmax(reached))  # the first budget with a finite median: where the curve starts
-                ax.plot(f.budgets[k], f.cost[1][k], marker=marker, color=colour, linestyle="none", markersize=6)
-            if reached.any() and f.cost[1][reached].min() > top:
-                above.setdefault(panel, []).append(f"{f.label} ({np.nanmin(f.cost[1][reached]):.3g})")
-        cost_axis(ax, low, top)
-        ax.set_xscale("symlog", linthresh=1.0)
-        ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
-        ax.set_xlim(-0.4, right * 1.15 + 1)
-        ax.set_xlabel("link budget L (directed off-diagonal links)")
-        ax.set_ylabel("best cost with ≤ L links (median, 25–75 %)")
-        # Wrapped to the panel's width: with several panels side by side a long list ran into the next title.
-        note = textwrap.fill("above the axis: " + ", ".join(above[panel]), 60) if panel in above else ""
-        ax.set_title(panel_title(panel) + ("\n" + note if note else ""), fontsize=10 if note else None)
-        ax.axhline(1.0, color="0.6", linewidth=0.8, zorder=0)
+            # Not started (inf) leaves a gap, not a line off the axis.
+            q1, med, q3 = (np.where(np.isfinite(v), excess(v), np.nan) for v in (q1, med, q3))
+            ax.step(x, med, where="post", color=s.colour, linestyle=s.linestyle, linewidth=1.5,
+                    gid=method_gid(f.label))
+            ax.fill_between(x, q1, q3, step="post", color=s.colour, alpha=0.08, linewidth=0)
+            if f.start is not None and np.nanmin(f.cost[1]) > OFF_SCALE:
+                above.setdefault(panel, []).append(f"{f.label} ({np.nanmin(f.cost[1]):.3g})")
+            elif f.start is not None:
+                k = int(np.searchsorted(f.budgets, f.start))
+                ax.plot(f.budgets[k] / scale, excess(f.cost[1][k]), marker=s.marker, color=s.colour,
+                        linestyle="none", markersize=6, markerfacecolor=s.face,
+                        markeredgecolor="white" if s.face == s.colour else s.colour,
+                        markeredgewidth=0.5 if s.face == s.colour else 1.2,
+                        zorder=4 if f.label.startswith("LQR") or f.budgets.size == 1 else 3,
+                        clip_on=bool(f.cost[1][k] - 1.0 > top * 1.25), gid=method_gid(f.label))
+            if f.covered < f.instances:
+                partial.setdefault(panel, []).append(f"{f.label} ({f.covered} of {f.instances})")
+        excess_axis(ax, low * 0.8, top * 1.25)
+        links_axis(ax, right, per_node=per_node)
+        ax.set_xlabel("link budget L per node" if per_node else "link budget L (directed off-diagonal links)")
+        ax.set_ylabel("best excess cost over LQR")
+        notes = [textwrap.fill(f"{head}: " + ", ".join(items[panel]), 60)
+                 for head, items in (("above the axis", above), ("designs on some instances only", partial))
+                 if panel in items]
+        ax.set_title("\n".join([panel_heading(panel, max(f.instances for f in mine))] + notes),
+                     fontsize=9 if notes else 10)
         if bounds and panel in bounds:
             value, text = bounds[panel]
-            ax.axhline(value, color="black", linewidth=1.0, linestyle=(0, (4, 2, 1, 2)), zorder=1)
-            ax.text(0.01, value, f" {text}", transform=ax.get_yaxis_transform(), ha="left", va="top", fontsize=7)
+            ax.axhline(excess(value), color=BOUND_COLOUR, linewidth=1.0, linestyle=(0, (4, 2, 1, 2)), zorder=1)
+            ax.text(0.01, excess(value), f" {text}", transform=ax.get_yaxis_transform(), ha="left", va="top",
+                    fontsize=7)
         if boundaries and panel in boundaries and any(f.info_model == "delayed" for f in mine):
-            draw_boundary(ax, boundaries[panel])
+            draw_boundary(ax, boundaries[panel] / scale)
         ax.grid(True, which="major", alpha=0.3)
-    finish_legend(fig, axes, spare, legend_handles(styles, labels, {f.info_model for f in fronts}))
+    if own:
+        finish_legend(fig, legend_handles(styles, labels),
+                      title="median over instances; band 25–75 %")
     return fig, axes
-
-

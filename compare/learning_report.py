@@ -7,6 +7,7 @@ rows); learned controllers keep ``extras["curve"] = {"step": [...], "cost": [...
 from __future__ import annotations
 
 from collections import defaultdict
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.stats
@@ -14,7 +15,7 @@ import scipy.stats
 from .records import OK_STATUSES, as_records
 
 __all__ = ["table1_markdown", "training_curves_figure", "bootstrap_interval", "PAPER_TABLE1", "PAPER_SPARSE_EDGES",
-           "GAP_NOTES", "SPARSE_EDGES_NOTE"]
+           "PAPER_STATISTIC", "GAP_NOTES", "SPARSE_EDGES_NOTE", "DASH"]
 
 #: Paper Table 1 (docs/reproduction.md): median normalized cost over 50 instances; autonomous is a mean.
 PAPER_TABLE1 = {
@@ -79,6 +80,14 @@ def _gap_note(method, stat, paper, low, high) -> str:
 
 _ROW_ORDER = ["lqr", "autonomous", "grnn", "grnn_dense", "grnn_sparse", "grnn_fixed", "gcnn"]
 
+#: The statistic over instances of each paper value (Table 1 gives medians; Autonomous a mean).
+PAPER_STATISTIC = {"autonomous": "mean"}
+#: A mean is shown beside a median where the two differ by more than this fraction of the median.
+_MATERIAL = 0.02
+#: What "—" stands for in the tables of this module.
+DASH = "—"
+_STATISTICS = {"median": np.median, "mean": np.mean}
+
 
 def _a_norm(record) -> float:
     a_norm = record.instance.a_norm
@@ -86,7 +95,26 @@ def _a_norm(record) -> float:
 
 
 def _fmt(value, digits=3) -> str:
-    return "–" if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
+    return DASH if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
+
+
+def _signed(value: float, digits: int, unit: str = "") -> str:
+    """``value`` with its sign, ``digits`` decimals and ``unit``; a value that rounds to zero has no sign."""
+    text = f"{value:+.{digits}f}"
+    if float(text) == 0:
+        text = f"{0:.{digits}f}"
+    return text + unit
+
+
+def _links_text(value: float) -> str:
+    """A link count in plain decimal notation: whole numbers without decimals, others to one decimal."""
+    if not np.isfinite(value):
+        return DASH
+    return f"{value:.0f}" if float(value).is_integer() else f"{value:.1f}"
+
+
+def _material(mean: float, median: float) -> bool:
+    return bool(np.isfinite(mean) and np.isfinite(median) and abs(mean - median) > _MATERIAL * abs(median))
 
 
 #: Bootstrap resamples for the confidence interval of a Table 1 statistic.
@@ -107,16 +135,101 @@ def bootstrap_interval(values, statistic=np.median, *, level: float = 0.95, seed
     return float(result.confidence_interval.low), float(result.confidence_interval.high)
 
 
-def table1_markdown(records) -> str:
-    """Markdown Table 1: our statistic per (method, ||A||) beside the paper's value.
+@dataclass(frozen=True)
+class _Cost:
+    """One method at one ‖A‖₂: our median and mean cost, and the statistic compared with the paper's value."""
 
-    Costs are medians over instances (autonomous: the mean, as in the paper),
-    with a 95 % bootstrap interval over instances; failed designs are left out
-    of the statistic and counted in the ``ok`` column. Links are means over
-    instances: directed off-diagonal links, and in parentheses with self-loops
-    (the paper's edge convention). Below the table, every paper value outside
-    our interval is listed with what is known to cause the gap
-    (:data:`GAP_NOTES`).
+    median: float
+    low: float
+    high: float
+    mean: float
+    paper: float | None
+    statistic: str  # the paper's statistic, which ours is compared in
+    ours: float  # our value of that statistic
+    ours_low: float
+    ours_high: float
+
+    @classmethod
+    def of(cls, costs: np.ndarray, paper: float | None, statistic: str) -> _Cost:
+        median = float(np.median(costs)) if costs.size else float("nan")
+        mean = float(np.mean(costs)) if costs.size else float("nan")
+        low, high = bootstrap_interval(costs, np.median)
+        if statistic == "median":
+            return cls(median, low, high, mean, paper, statistic, median, low, high)
+        ours_low, ours_high = bootstrap_interval(costs, _STATISTICS[statistic])
+        return cls(median, low, high, mean, paper, statistic, mean, ours_low, ours_high)
+
+    @property
+    def outside(self) -> bool:
+        """Whether the paper's value lies outside our interval of the same statistic."""
+        return bool(self.paper and np.isfinite(self.ours_low) and not self.ours_low <= self.paper <= self.ours_high)
+
+    def cells(self) -> list[str]:
+        """Median, its interval, the mean (where it differs materially or is what the paper reported), paper, Δ."""
+        interval = f"[{_fmt(self.low)}, {_fmt(self.high)}]" if np.isfinite(self.low) else DASH
+        show_mean = _material(self.mean, self.median) or (self.paper and self.statistic == "mean")
+        mean = _fmt(self.mean) if show_mean else DASH
+        marked = f" ({self.statistic})" if self.statistic != "median" else ""
+        paper = _fmt(self.paper) + marked if self.paper else DASH
+        gap = DASH
+        if self.paper and np.isfinite(self.ours):
+            gap = _signed(100 * (self.ours / self.paper - 1), 1, " %") + marked
+        return [_fmt(self.median), interval, mean, paper, gap]
+
+
+def _link_cell(good, *, paper_edges: float | None = None) -> tuple[str, tuple | None]:
+    """Median directed off-diagonal links (with self-loops), the means beside them where they differ materially.
+
+    With ``paper_edges`` (the paper's mean edge count, self-loops included) the mean is
+    always shown, with its 95 % bootstrap interval; returns the cell and, where the paper's
+    count lies outside that interval, (mean, low, high).
+    """
+    links = np.array([np.nan if r.links is None else r.links for r in good], dtype=float)
+    loops = np.array([np.nan if r.self_loops is None else r.self_loops for r in good], dtype=float)
+    if not links.size:
+        return DASH, None
+    edges = links + loops
+    cell = f"{_links_text(np.median(links))} ({_links_text(np.median(edges))})"
+    if paper_edges is None:
+        if _material(links.mean(), np.median(links)) or _material(edges.mean(), np.median(edges)):
+            cell += f"; mean {links.mean():.1f} ({edges.mean():.1f})"
+        return cell, None
+    low, high = bootstrap_interval(edges, np.mean)
+    cell += (f"; mean {links.mean():.1f} ({edges.mean():.1f}) [{_fmt(low, 1)}, {_fmt(high, 1)}]; "
+             f"paper mean ({paper_edges:.1f})")
+    outside = np.isfinite(low) and not low <= paper_edges <= high
+    return cell, (float(edges.mean()), low, high) if outside else None
+
+
+def _caption() -> str:
+    return (
+        "\nCosts: E[J]/trace(P), exact for linear controllers and a control-variate estimate on the validation "
+        "set for learned ones. The main number is the median over instances, with a 95 % bootstrap interval "
+        "of that median; the mean is given beside it where it differs from the median by more than "
+        f"{100 * _MATERIAL:g} % (a few instances far above the rest pull a mean up), and always where the "
+        "paper's value is a mean. The paper reported medians over its 50 instances, except for Autonomous "
+        "(a mean, marked \"(mean)\"); Δ compares the paper's value with ours in the same statistic. "
+        "Links: median directed off-diagonal links over instances, in parentheses with self-loops (the "
+        "convention of the paper's edge counts), and the means beside them where they differ by more than "
+        f"{100 * _MATERIAL:g} %; for GRNN-Sparse the paper gave the mean edge count, self-loops included "
+        "(53.4 / 56.1), shown with a 95 % bootstrap interval of our mean. "
+        f"{DASH}: no value (the mean is within {100 * _MATERIAL:g} % of the median, the paper has no value, or "
+        "no design succeeded).\n"
+    )
+
+
+def table1_markdown(records) -> str:
+    """Markdown Table 1: our medians (and means where they differ) per (method, ‖A‖₂) beside the paper's value.
+
+    Costs are medians over instances, with a 95 % bootstrap interval; the mean
+    is shown beside the median where the two differ materially, and wherever
+    the paper's value is a mean (Autonomous, :data:`PAPER_STATISTIC`); the
+    relative difference Δ compares the paper's value with ours in the paper's
+    statistic. Failed designs are left out of the statistics and counted in the
+    ``ok`` column. Links are medians over instances: directed off-diagonal
+    links, and in parentheses with self-loops (the paper's edge convention).
+    Below the table, every paper value outside our interval is listed with what
+    is known to cause the gap (:data:`GAP_NOTES`).
     """
     records = as_records(records)
     groups = records.group(lambda r: (r.method, r.label or r.method))
@@ -130,65 +243,51 @@ def table1_markdown(records) -> str:
 
     header = ["Method"]
     for a in a_norms:
-        header += [f"‖A‖={a:g} ours", "95 % CI", "paper", "Δ", "ok", "links (w/ self-loops)"]
+        header += [f"‖A‖₂ = {a:g}: median", "95 % CI", "mean", "paper", "Δ", "ok", "links (w/ self-loops)"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     notes = []
     outside = []
     edge_gaps = []
     for method, label in sorted(groups, key=order):
         rows = groups[(method, label)]
+        linear = any(r.params.get("activation") == "identity" for r in rows)
         cells = [label]
         for a in a_norms:
             here = [r for r in rows if _a_norm(r) == a]
             good = [r for r in here if r.ok]
-            costs = np.array([r.cost for r in good], dtype=float)
-            statistic = np.mean if method == "autonomous" else np.median
-            stat = float(statistic(costs)) if costs.size else float("nan")
-            low, high = bootstrap_interval(costs, statistic)
-            interval = f"[{_fmt(low)}, {_fmt(high)}]" if np.isfinite(low) else "–"
-            linear = any(r.params.get("activation") == "identity" for r in rows)
             paper = None if linear else PAPER_TABLE1.get(method, {}).get(a)
-            gap = f"{100 * (stat / paper - 1):+.1f} %" if paper and np.isfinite(stat) else "–"
-            if paper and np.isfinite(low) and not low <= paper <= high:
-                outside.append((method, label, a, stat, paper, low, high))
-            links = np.array([np.nan if r.links is None else r.links for r in good], dtype=float)
-            loops = np.array([np.nan if r.self_loops is None else r.self_loops for r in good], dtype=float)
-            if links.size:
-                link_cell = f"{links.mean():.1f} ({(links + loops).mean():.1f})"
-            else:
-                link_cell = "–"
-            if method == "grnn_sparse" and not linear and a in PAPER_SPARSE_EDGES and links.size:
-                edges = PAPER_SPARSE_EDGES[a]
-                e_low, e_high = bootstrap_interval(links + loops, np.mean)
-                link_cell += f" [{_fmt(e_low, 1)}, {_fmt(e_high, 1)}]; paper ({edges:.1f})"
-                if np.isfinite(e_low) and not e_low <= edges <= e_high:
-                    edge_gaps.append((label, a, float((links + loops).mean()), edges, e_low, e_high))
-            cells += [_fmt(stat), interval, _fmt(paper) if paper else "–", gap, f"{len(good)}/{len(here)}",
-                      link_cell]
+            cost = _Cost.of(np.array([r.cost for r in good], dtype=float), paper,
+                            PAPER_STATISTIC.get(method, "median"))
+            if cost.outside:
+                outside.append((method, label, a, cost))
+            edges = PAPER_SPARSE_EDGES.get(a) if method == "grnn_sparse" and not linear else None
+            link_cell, edge_gap = _link_cell(good, paper_edges=edges)
+            if edge_gap:
+                edge_gaps.append((label, a, *edge_gap, edges))
+            cells += cost.cells() + [f"{len(good)}/{len(here)}", link_cell]
         lines.append("| " + " | ".join(cells) + " |")
         if any(r.status not in OK_STATUSES for r in rows):
             statuses = defaultdict(int)
             for r in rows:
                 statuses[r.status] += 1
             notes.append(f"{label}: " + ", ".join(f"{v} {k}" for k, v in sorted(statuses.items())))
-    text = "\n".join(lines) + "\n"
-    text += ("\nCosts: E[J]/trace(P), exact for linear controllers and a control-variate estimate on the "
-             "validation set for learned ones (medians over instances; "
-             "Autonomous: mean), with a 95 % bootstrap interval over instances. Links: mean directed "
-             "off-diagonal links; in parentheses with self-loops, the convention of the paper's "
-             "53.4 / 56.1 for GRNN-Sparse, with a 95 % bootstrap interval of that mean.\n")
+    text = "\n".join(lines) + "\n" + _caption()
     text += _variant_pairs(records, a_norms)
     if outside:
-        text += "\nPaper values outside our 95 % interval, and why:\n\n"
-        for method, label, a, stat, paper, low, high in outside:
-            side = "below" if stat < paper else "above"
-            text += (f"- {label}, ‖A‖={a:g}: ours {stat:.3f} [{low:.3f}, {high:.3f}] is {side} the paper's "
-                     f"{paper:.3f}. {_gap_note(method, stat, paper, low, high)}\n")
+        text += "\nPaper values outside our 95 % interval of the same statistic, and why:\n\n"
+        for method, label, a, c in outside:
+            side = "below" if c.ours < c.paper else "above"
+            other = (f" (our mean: {c.mean:.3f})" if c.statistic == "median" and _material(c.mean, c.median)
+                     else "")
+            text += (f"- {label}, ‖A‖₂ = {a:g}: our {c.statistic} {c.ours:.3f} [{c.ours_low:.3f}, "
+                     f"{c.ours_high:.3f}]{other} is {side} the paper's {c.paper:.3f}. "
+                     f"{_gap_note(method, c.ours, c.paper, c.ours_low, c.ours_high)}\n")
     if edge_gaps:
         text += "\nEdge counts outside our 95 % interval:\n\n"
-        for label, a, mean, edges, low, high in edge_gaps:
-            text += (f"- {label}, ‖A‖={a:g}: {mean:.1f} edges with self-loops [{low:.1f}, {high:.1f}] against "
-                     f"the paper's {edges:.1f}.\n")
+        for label, a, mean, low, high, edges in edge_gaps:
+            text += (f"- {label}, ‖A‖₂ = {a:g}: a mean of {mean:.1f} edges with self-loops "
+                     f"[{low:.1f}, {high:.1f}] "
+                     f"against the paper's {edges:.1f}.\n")
         text += f"\n{SPARSE_EDGES_NOTE}\n"
     if notes:
         text += "\nNon-optimal designs (left out of the statistics): " + "; ".join(notes) + "\n"
@@ -205,7 +304,9 @@ def _variant_pairs(records, a_norms) -> str:
     label = {r.method: r.label or r.method for r in records}
     lines = ["", "Paired differences between the GRNN variants (first minus second, per instance; negative: the "
              "first is better): instances where each is better, median difference and a distribution-free 95 % "
-             "interval for it.", "", "| pair | ‖A‖ | instances | first better | second better | median Δ | 95 % interval | |",
+             "interval for it (with its achieved coverage where too few instances allow 95 %); the note says "
+             "where that interval contains 0.", "",
+             "| pair | ‖A‖₂ | instances | first better | second better | median Δ | 95 % interval | note |",
              "|---|---|---:|---:|---:|---:|---|---|"]
     for a in a_norms:
         costs = {m: {r.instance.key: r.cost for r in records if r.method == m and _a_norm(r) == a and r.ok}
@@ -219,13 +320,48 @@ def _variant_pairs(records, a_norms) -> str:
                 if not p.instances:
                     continue
                 note = "interval contains 0" if p.inconclusive else ""
+                interval = f"[{_signed(p.low, 4)}, {_signed(p.high, 4)}]" + (
+                    f" ({p.coverage:.0%})" if p.too_few else "")
                 lines.append(f"| {p.a} − {p.b} | {a:g} | {p.instances} | {p.a_wins} | {p.b_wins} | "
-                             f"{p.median:+.4f} | {p.interval_text} | {note} |")
+                             f"{_signed(p.median, 4)} | {interval} | {note} |")
     return "\n".join(lines) + "\n"
 
 
-def training_curves_figure(records, ax=None):
-    """Median and quartiles of the validation cost against training step, per method (paper Fig. 2).
+def _curves(records) -> dict[float, dict[str, list]]:
+    """‖A‖₂ -> label -> the training curves of that label's usable designs."""
+    curves: dict[float, dict[str, list]] = defaultdict(lambda: defaultdict(list))
+    for record in as_records(records):
+        curve = record.extras.get("curve")
+        if curve and record.ok:
+            curves[_a_norm(record)][record.label or record.method].append(curve)
+    return curves
+
+
+def _curve_axes(ax, panels: int):
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        fig, axes = plt.subplots(1, max(1, panels), figsize=(6 * max(1, panels), 4.2), squeeze=False)
+        return fig, list(axes[0])
+    axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
+    if len(axes) not in (1, panels) and panels:
+        raise ValueError(f"need one axis per ‖A‖₂ ({panels}) or a single axis, got {len(axes)}")
+    return axes[0].figure, axes
+
+
+def _markevery(points: int, k: int, curves: int) -> tuple[int, int]:
+    """About eight markers per curve, the k-th of ``curves`` curves shifted so that their markers do not stack."""
+    every = max(1, points // 8)
+    return (k * every // max(curves, 1), every)
+
+
+def training_curves_figure(records, ax=None, *, styles=None):
+    """Median and quartiles of the selection-set cost against training step, per method (paper Fig. 2).
+
+    The selection set is the fixed set of initial states on which a learned
+    controller's cost is recorded during training and its ensemble member chosen
+    (``curve_size`` draws, see :mod:`codesign.grnn`), apart from the validation set
+    that scores the final design.
 
     Parameters
     ----------
@@ -233,59 +369,60 @@ def training_curves_figure(records, ax=None):
         Records whose ``extras["curve"]`` holds ``step`` and ``cost`` lists;
         others are ignored.
     ax : matplotlib Axes or sequence of Axes, optional
-        One axis per ||A|| present (a single axis is fine with one ||A||; with
-        several, every curve goes on it with ||A|| in the legend). A new figure
-        with one panel per ||A|| is made when omitted.
+        One axis per ‖A‖₂ present (a single axis is fine with one ‖A‖₂; with
+        several, every curve goes on it with ‖A‖₂ in the legend and its own line
+        style). A new figure with one panel per ‖A‖₂ is made when omitted.
+    styles : dict, optional
+        Label -> :class:`compare.styles.Style`, the report's, so that each method has
+        the colour and marker it has in every other figure; by default
+        :func:`compare.styles.label_styles` of ``records``.
 
     Returns
     -------
     (fig, axes) : the figure and the list of axes drawn on (never shown).
     """
-    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
-    curves: dict[float, dict[str, list]] = defaultdict(lambda: defaultdict(list))
-    for record in as_records(records):
-        curve = record.extras.get("curve")
-        if not curve or not record.ok:
-            continue
-        curves[_a_norm(record)][record.label or record.method].append(curve)
+    from .styles import REFERENCE_COLOUR, label_styles
+
+    records = as_records(records)
+    styles = dict(label_styles(records), **(styles or {}))
+    curves = _curves(records)
     a_norms = sorted(curves)
-    if ax is None:
-        fig, axes = plt.subplots(1, max(1, len(a_norms)), figsize=(6 * max(1, len(a_norms)), 4.2), squeeze=False)
-        axes = list(axes[0])
-    else:
-        axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
-        fig = axes[0].figure
-    if len(axes) not in (1, len(a_norms)) and a_norms:
-        raise ValueError(f"need one axis per a_norm ({len(a_norms)}) or a single axis, got {len(axes)}")
-    labels = sorted({label for by_label in curves.values() for label in by_label})
-    colors = {label: plt.cm.tab10(i % 10) for i, label in enumerate(labels)}
+    fig, axes = _curve_axes(ax, len(a_norms))
     shared = len(axes) == 1 and len(a_norms) > 1
-    styles = ["-", "--", ":", "-."]
+    norm_styles = ["-", "--", ":", "-."]
     final_hi: dict[int, float] = defaultdict(float)  # per axis: highest final upper quartile
     for i, a in enumerate(a_norms):
         axis = axes[0] if shared else axes[i]
-        for label, items in sorted(curves[a].items()):
+        for k, (label, items) in enumerate(sorted(curves[a].items())):
+            colour, marker = styles[label][0], styles[label][1]
+            linestyle = getattr(styles[label], "linestyle", "-")
             steps = items[0]["step"]
             costs = np.array([c["cost"] for c in items if c["step"] == steps], dtype=float)
             med = np.median(costs, axis=0)
             lo, hi = np.quantile(costs, 0.25, axis=0), np.quantile(costs, 0.75, axis=0)
-            name = f"{label} (‖A‖={a:g})" if shared else label
-            style = styles[i % len(styles)] if shared else "-"
-            axis.plot(steps, med, style, color=colors[label], label=f"{name}, n={len(costs)}")
-            axis.fill_between(steps, lo, hi, color=colors[label], alpha=0.2, linewidth=0)
+            name = f"{label} (‖A‖₂ = {a:g})" if shared else label
+            axis.plot(steps, med, linestyle=norm_styles[i % len(norm_styles)] if shared else linestyle,
+                      color=colour, marker=marker, markevery=_markevery(len(steps), k, len(curves[a])), markersize=5,
+                      label=f"{name}, {len(costs)} instances", gid=f"method:{label}")
+            axis.fill_between(steps, lo, hi, color=colour, alpha=0.15, linewidth=0)
             final_hi[id(axis)] = max(final_hi[id(axis)], float(hi[-1]))
         if not shared:
-            axis.set_title(f"‖A‖ = {a:g}")
+            axis.set_title(f"‖A‖₂ = {a:g}")
     for axis in axes[: (1 if shared else len(a_norms))]:
         axis.set_yscale("log")
+        # Costs span a decade or so: plain 1-2-5 labels, not powers of ten.
+        axis.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        axis.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+        axis.yaxis.set_minor_formatter(NullFormatter())
         # The untrained controllers start orders of magnitude higher: keep the
         # converged region readable (the first points run off the top).
         if final_hi.get(id(axis)):
             axis.set_ylim(0.9, 4.0 * final_hi[id(axis)])
         axis.set_xlabel("training step")
-        axis.set_ylabel("validation cost  E[J] / trace(P)")
-        axis.axhline(1.0, color="0.5", linewidth=0.8)
+        axis.set_ylabel("selection-set cost  E[J] / trace(P)")
+        axis.axhline(1.0, color=REFERENCE_COLOUR, linewidth=1.0, zorder=0)
         axis.grid(True, which="both", alpha=0.3)
         axis.legend(fontsize=8)
     return fig, axes

@@ -2,8 +2,9 @@
 
 A method's *best cost within a budget* L on an instance is the lowest cost among
 its designs there with at most L directed off-diagonal links (infinite when none
-fits, or when the method failed there). Its budget front is the median over
-instances of that best cost as a step function of L, with the 25–75 % band.
+fits, or when the method failed there). Its budget front is the median over the
+instances where it has a design of that best cost as a step function of L, with
+the 25–75 % band, from the budget at which every one of them has a design.
 
 Paired comparisons take the per-instance difference of two methods' best costs
 within the same budget, on the instances where both have a design that fits:
@@ -22,7 +23,7 @@ from scipy import stats
 from .records import OK_STATUSES, as_records, panel_key
 
 __all__ = ["Front", "budget_fronts", "best_within", "best_tables", "Paired", "paired_difference", "median_interval",
-           "paired_comparisons", "instances_by_panel", "panel_key", "panel_title", "OK_STATUSES"]
+           "paired_comparisons", "instances_by_panel", "covered_quantiles", "panel_key", "panel_title", "OK_STATUSES"]
 
 # Quantiles of values that may be infinite: replace inf by a huge sentinel, so that a
 # median between a finite and an infinite value reads as "not reached" (inf).
@@ -55,10 +56,13 @@ def _quantiles(values) -> np.ndarray:
 class Front:
     """A method's budget front on one panel: step function of the link budget.
 
-    ``cost[:, k]`` holds the (25 %, median, 75 %) over the ``instances`` instances
-    the method ran on of the best cost within ``budgets[k]`` links; it holds from
-    ``budgets[k]`` up to the next budget. ``inf`` where fewer than that share of
-    those instances has a design within the budget.
+    ``cost[:, k]`` holds the (25 %, median, 75 %), over the ``covered`` instances on
+    which the method has at least one usable design, of the best cost within
+    ``budgets[k]`` links; it holds from ``budgets[k]`` up to the next budget. It is
+    ``inf`` until every one of those instances has a design within the budget
+    (``reached[k] == covered``), so that a front never starts with a jump made by
+    instances arriving one by one. ``instances`` counts the instances the method ran
+    on (``covered`` fewer where it failed on some).
     """
 
     panel: tuple
@@ -67,6 +71,8 @@ class Front:
     budgets: np.ndarray
     cost: np.ndarray
     instances: int
+    covered: int = 0
+    reached: np.ndarray | None = None
 
     def at(self, budget: float) -> tuple[float, float, float]:
         """(25 %, median, 75 %) of the best cost within ``budget`` links."""
@@ -74,6 +80,12 @@ class Front:
         if k < 0:
             return (np.inf,) * 3
         return tuple(float(v) for v in self.cost[:, k])
+
+    @property
+    def start(self) -> float | None:
+        """The smallest budget at which every covered instance has a design (None if never)."""
+        defined = np.isfinite(self.cost[1])
+        return float(self.budgets[int(np.argmax(defined))]) if defined.any() else None
 
 
 def best_within(records, panel_instances: list[str], budgets) -> np.ndarray:
@@ -113,10 +125,26 @@ def budget_fronts(records) -> list[Front]:
     fronts = []
     for (panel, label), rs in sorted(records.by_panel_label.items()):
         budgets = np.unique([0.0] + [float(r.links) for r in rs if r.ok])
-        best = best_within(rs, panels[panel], budgets)
+        cost, reached, covered = covered_quantiles(best_within(rs, panels[panel], budgets))
         info = Counter(r.info_model for r in rs).most_common(1)[0][0]
-        fronts.append(Front(panel, label, info, budgets, _quantiles(best), len(rs.by_instance)))
+        fronts.append(Front(panel, label, info, budgets, cost, len(rs.by_instance), covered, reached))
     return fronts
+
+
+def covered_quantiles(best) -> tuple[np.ndarray, np.ndarray, int]:
+    """Quartiles of best costs (instances x budgets) over the instances with any design, where all have one.
+
+    Returns ``(cost, reached, covered)``: ``cost[:, k]`` the (25 %, median, 75 %) over
+    the ``covered`` instances with a usable design at some budget, ``inf`` unless all
+    of them have one within budget ``k``; ``reached[k]`` how many do. Rows of NaN
+    (instances the method did not run on) are left out.
+    """
+    best = np.asarray(best, dtype=float)
+    covered = best[np.isfinite(best).any(axis=1)]
+    reached = np.isfinite(covered).sum(axis=0)
+    cost = _quantiles(covered) if len(covered) else np.full((3, best.shape[1]), np.inf)
+    cost[:, reached < len(covered)] = np.inf
+    return cost, reached, len(covered)
 
 
 def median_interval(differences, confidence: float = 0.95) -> tuple[float, float, float]:

@@ -28,6 +28,7 @@ import numpy as np
 
 from baselines import lqr, sls, sparse_admm, sparse_delayed
 from codesign import Instance, StaticGain, get_method, grnn, method, paper_instance, score
+from compare.styles import style_for
 
 SMALL = os.environ.get("EXAMPLES_SMALL") == "1"
 STEPS = 40 if SMALL else 150
@@ -79,15 +80,19 @@ for d in designs["GRNN-Sparse (β path)"]:
 
 # %%
 def plot_designs(designs, ax=None):
-    """Cost against links, one line per method (exact or simulated cost; failed designs left out)."""
+    """Cost against links, one line per method (exact or simulated cost; failed designs left out).
+
+    Each method in the colour, marker and line style (its information model) it has in every report.
+    """
     ax = ax or plt.gca()
     for name, path in designs.items():
         ok = sorted((d.links, d.cost) for d in path if d.status in ("optimal", "inaccurate"))
         if ok:
             x, y = zip(*ok)
+            style = style_for(path[0].method, path[0].params, path[0].info_model)
             single = len(ok) == 1  # a one-design method: a larger marker, drawn on top
-            ax.plot(x, y, marker="*" if single else "o", markersize=12 if single else 5, zorder=3 if single else 2,
-                    label=name)
+            ax.plot(x, y, color=style.colour, marker=style.marker, markerfacecolor=style.face,
+                    linestyle=style.linestyle, markersize=9 if single else 5, zorder=3 if single else 2, label=name)
     ax.set_xscale("symlog", linthresh=1)
     ax.xaxis.set_major_formatter(plt.FuncFormatter(lambda value, _: f"{value:g}"))
     ax.set_xlabel("directed off-diagonal links")

@@ -42,29 +42,33 @@ def test_plant_boundary_and_plot_handles():
     (panel, links), = boundary.items()
     assert 0 < links <= 8 * 7
     fig, axes = plot_cost_vs_links(aggregate(records), boundaries=boundary)
-    assert len(axes) == 1 and axes[0].get_xscale() == "symlog"
-    assert np.isclose(axes[0].lines[-1].get_xdata()[0], links)
+    (ax,) = axes.values()
+    assert ax.get_xscale() == "symlog"
+    assert np.isclose(ax.lines[-1].get_xdata()[0], links)
 
 
 def _vertical_lines(ax):
     return [line for line in ax.lines if len(set(line.get_xdata())) == 1 and len(line.get_xdata()) == 2]
 
 
-def test_qi_boundary_only_with_a_delayed_method_and_linear_axis_for_a_narrow_range():
+def test_qi_boundary_only_with_a_delayed_method_and_an_excess_cost_axis_in_percent():
     records = [_rec(inst, "m", 5, 1.2) for inst in INST] + [_rec(inst, "lqr", 56, 1.0) for inst in INST]
     fig, axes = plot_cost_vs_links(aggregate(records), boundaries=plant_links(records))
-    assert not _vertical_lines(axes[0])
-    assert axes[0].get_yscale() == "linear"
-    labels = [t.get_text() for t in axes[0].get_yticklabels() if t.get_text()]
-    assert len(labels) >= 3  # a narrow range still gets several labelled ticks
+    (ax,) = axes.values()
+    assert not _vertical_lines(ax)
+    assert ax.get_yscale() == "log"
+    fig.canvas.draw()
+    labels = [t.get_text() for t in ax.get_yticklabels() if t.get_text()]
+    assert len(labels) >= 2 and all(text.endswith("%") for text in labels)
+    assert any(text == "10 %" for text in labels)  # the cost 1.2 is 20 % above LQR
 
 
 def test_single_setting_methods_at_the_same_link_count_are_dodged():
-    from compare.report import _dodge
+    from compare.cost_links import _dodge
 
     records = [_rec(inst, label, 0, 1.3) for inst in INST for label in ("autonomous", "decentralized")]
     points = aggregate(records)
-    offsets = _dodge({p.label: [p] for p in points}, right=56)
+    offsets = _dodge({p.label: [(p.x, p.cost[1])] for p in points}, right=56)
     assert len(offsets) == 2 and len(set(offsets.values())) == 2
 
 
@@ -74,15 +78,29 @@ def test_dodged_markers_stay_inside_the_axes():
     records += [_rec(inst, "path", links, 1.5 - 0.01 * links, params={"gamma": links})
                 for inst in INST for links in (0, 2, 5)]
     fig, axes = plot_cost_vs_links(aggregate(records))
-    assert axes[0].get_xlim()[1] > 56
+    assert axes[INST[0]["family"], 8, 1.05].get_xlim()[1] > 56
     fig.clf()
 
 
-def test_many_methods_get_distinct_colour_and_marker_pairs():
-    from compare.figures import label_styles
+def test_a_summary_marker_is_drawn_only_where_some_design_reaches_it():
+    """Medians of links and of cost taken separately can describe no design: then there is no marker."""
+    insts = [dict(INST[0], seed=s) for s in range(6)]
 
-    styles = label_styles([f"method {i}" for i in range(30)])
-    assert len({(tuple(c), m) for c, m in styles.values()}) == 30
+    def setting(links, costs):
+        return [_rec(inst, "m", k, c, params={"beta": 1.0}) for inst, k, c in zip(insts, links, costs)]
+
+    # Links 0, 0, 0, 50, 50, 50 (lower median 0); costs median (1.1 + 1.5) / 2 = 1.3, and every 0-link
+    # design costs more than that: the medians (0, 1.3) describe no design.
+    (point,) = aggregate(setting((0, 0, 0, 50, 50, 50), (1.5, 1.6, 1.7, 1.0, 1.05, 1.1)))
+    assert (point.x, point.cost[1], point.reached) == (0, 1.3, False)
+    fig, axes = plot_cost_vs_links([point])
+    (ax,) = axes.values()
+    assert not [line for line in ax.lines if (line.get_gid() or "").startswith("method:") and len(line.get_xdata())]
+    # A 0-link design at 1.1 reaches the medians (0, 1.15); the marker then sits at a link count some design has.
+    (point,) = aggregate(setting((0, 0, 0, 50, 50, 50), (1.1, 1.6, 1.7, 1.0, 1.05, 1.2)))
+    assert (point.x, point.cost[1], point.reached) == (0, 1.15, True)
+    (point,) = aggregate(setting((3, 4, 7, 8, 9, 10), (1.2,) * 6))
+    assert point.x == 7  # the lower median, not 7.5
 
 
 def test_topology_path_prefers_the_papers_a_norm_then_the_longest_path_and_draws_each_design():
@@ -139,15 +157,15 @@ def test_report_counts_runs_and_shows_how_to_regenerate(tmp_path):
     commands = ["compare run x --out o", "compare run y --out o", "compare report --out o"]
     files = write_report(records, tmp_path, title="T", commands=commands)
     text = files["md"].read_text()
-    assert "6 runs on 3 instances, 6 designs." in text
+    assert "6 runs on 3 instances (1 panel, 3 per panel), 6 designs by 2 methods." in text
     assert ("Regenerate with `compare run x --out o` then `compare run y --out o` (runs already in the store "
-            "are skipped), or from the stored results alone with `compare report --out o`.") in text
+            "are skipped), or rebuild this report from its folder alone") in text
     alone = write_report(records, tmp_path, title="T", commands=["compare report --out o"])["md"].read_text()
-    assert "Regenerate from the stored results with `compare report --out o`." in alone
+    assert "Rebuild this report from its folder alone with `compare report --out o`." in alone
 
 
 def test_params_column_rounds_grid_values_and_keeps_the_rest():
-    from compare.report import _params_text
+    from compare.report_tables import _params_text
 
     text = _params_text({"gamma": 0.0021544346900318843, "reweight": 3, "rho": 100.0, "end": float("inf"),
                          "g": "plant"})
@@ -183,57 +201,27 @@ method = "autonomous"
         assert ("## Table 1" in (out / "report.md").read_text()) is expected
 
 
-def test_delayed_section_says_when_the_paired_result_reverses_the_median_ranking(tmp_path):
-    from compare.figures import label_styles
-    from compare.report import _delayed_section
-
-    insts = [dict(INST[0], seed=s) for s in range(8)]
-    records = [_rec(inst, "A", 10, 1.0 if s < 4 else 1.2, info="delayed") for s, inst in enumerate(insts)]
-    # B ran on instances 2..7 only and beats A on each of them by 0.01.
-    records += [_rec(inst, "B", 10, (1.0 if s < 4 else 1.2) - 0.01, info="delayed")
-                for s, inst in enumerate(insts) if s >= 2]
-    lines = _delayed_section(records, tmp_path, {}, label_styles(["A", "B"]), {})
-    text = "\n".join(lines)
-    assert "at ≤ 20 links A (1.1) against B (1.19)" in text
-    assert "B significantly better on the 6 common instances" in text
-
-
-def test_delayed_section_claims_no_significance_from_three_instances(tmp_path):
-    """Three paired instances that all favour A: their range covers the median with 75 %, not 95 %."""
-    from compare.figures import label_styles
-    from compare.report import _delayed_section
-
-    insts = [dict(INST[0], seed=s) for s in range(3)]
-    records = [_rec(inst, "A", 10, 1.0 + 0.1 * s, info="delayed") for s, inst in enumerate(insts)]
-    records += [_rec(inst, "B", 10, 1.05 + 0.1 * s, info="delayed") for s, inst in enumerate(insts)]
-    text = "\n".join(_delayed_section(records, tmp_path, {}, label_styles(["A", "B"]), {}))
-    assert "significantly" not in text
-    assert "[-0.0500, -0.0500] (75%)" in text
-    assert "A better on every common instance; too few instances for a 95 % interval" in text
-
-
 def test_off_scale_values_get_one_label_per_value_and_neighbours_go_a_row_lower():
     """Costs above the axis: methods sharing a link count and value share a label; close labels do not overlap."""
-    from types import SimpleNamespace
-
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from compare.report import _mark_off_scale
+    from compare.cost_links import _mark_off_scale
 
     fig, ax = plt.subplots(figsize=(4, 3))
     ax.set_xscale("symlog", linthresh=1.0)
     ax.set_xlim(-0.2, 400)
     ax.set_ylim(0.9, 2.0)
 
-    def point(label, links, cost):
-        return SimpleNamespace(label=label, links=(links, links, links), cost=(cost, cost, cost))
+    colours = {"a": "red", "b": "blue", "c": "green"}
 
-    styles = {name: (colour, "o") for name, colour in (("a", "red"), ("b", "blue"), ("c", "green"))}
+    def point(label, links, cost):
+        return (links, cost, colours[label])
+
     rows = _mark_off_scale(ax, [point("a", 0, 2.3), point("b", 0, 2.3), point("c", 0, 1e26), point("a", 300, 5.0),
-                                point("b", 10, 3.0)], 2.0, styles)
+                                point("b", 10, 3.0)], 2.0)
     texts = {t.get_text(): t for t in ax.texts}
     assert sorted(texts) == ["1e+26", "2.3", "3", "5"]
     assert texts["2.3"].get_color() == "0.25"  # shared by two methods
@@ -253,7 +241,7 @@ def test_off_scale_values_get_one_label_per_value_and_neighbours_go_a_row_lower(
 
 def test_report_says_how_many_simulated_costs_were_refined_on_importance_draws():
     from compare.records import Records
-    from compare.report import _precision_text
+    from compare.report_tables import _precision_text
 
     def row(stderr, estimator, importance):
         return {"cost": 2.0, "cost_stderr": stderr, "cost_kind": "simulated", "status": "optimal",
@@ -271,7 +259,7 @@ def test_report_says_how_many_simulated_costs_were_refined_on_importance_draws()
 
 def test_report_warns_about_costs_that_stay_imprecise_after_refinement():
     from compare.records import Records
-    from compare.report import _uncertain_text
+    from compare.report_tables import _uncertain_text
 
     def row(label, stderr, a_norm):
         return {"label": label, "cost": 2.0, "cost_stderr": stderr, "cost_kind": "simulated", "status": "optimal",

@@ -31,10 +31,21 @@ def test_an_instance_without_a_design_within_the_budget_counts_as_not_reached():
     records = [_rec(INST[0], "m", 10, 1.0), _rec(INST[1], "m", 50, 1.0), _rec(INST[2], "m", 50, 1.0),
                _rec(INST[3], "m", 0, float("nan"), status="failed"), _rec(INST[3], "other", 0, 2.0)]
     front = next(f for f in budget_fronts(records) if f.label == "m")
-    assert front.instances == 4  # it ran on all four, and failed on one
-    assert front.at(10)[1] == np.inf  # 1 of 4 instances: the median is not reached
-    # 3 of 4 have one: the median is reached, the 75 % quantile lies between 1 and the missing one.
-    assert front.at(50) == (1.0, 1.0, np.inf)
+    assert front.instances == 4 and front.covered == 3  # it ran on all four, and failed on one
+    assert list(front.reached) == [0, 1, 3]
+    assert front.at(10)[1] == np.inf  # 1 of the 3 with a design: the front has not started
+    # Every instance with a design has one within 50 links: the front starts there, over those three.
+    assert front.at(50) == (1.0, 1.0, 1.0) and front.start == 50
+
+
+def test_a_front_never_starts_with_a_jump():
+    """Instances reaching the budget one by one made the median jump (a spike at the start); it starts once all have."""
+    records = [_rec(INST[0], "m", 2, 3.0), _rec(INST[0], "m", 40, 1.1), _rec(INST[1], "m", 5, 2.9),
+               _rec(INST[1], "m", 40, 1.2), _rec(INST[2], "m", 30, 1.3), _rec(INST[3], "m", 40, 1.15)]
+    front = budget_fronts(records)[0]
+    assert front.start == 40
+    finite = front.cost[1][np.isfinite(front.cost[1])]
+    assert finite.size and np.all(np.diff(finite) <= 0)
 
 
 def test_a_method_run_on_some_instances_of_a_panel_is_summarized_over_those():

@@ -1,0 +1,376 @@
+"""Findings: the claims a report's data support, and the forest plot they come from.
+
+A report opens with a short list of claims, each backed by paired comparisons
+drawn in its first figure. The comparisons are the ones a control researcher
+asks of the data, per panel and link budget:
+
+- each learned delayed design (GRNN variants; tanh and linear apart) against the
+  delayed ℓ1 static gain, and linear against tanh GRNN-Sparse: both designs see
+  the same information (one step per hop);
+- every delayed design against the SLS bound (SLS on the complete graph at one
+  hop per step), the best cost any controller with that information reaches;
+- cross-model context, marked as such: GRNN-Sparse against the instantaneous ℓ1
+  gain and against the decentralized gain (no communication), GCNN against the
+  instantaneous ℓ1 gain;
+- the pairs a spec asks for.
+
+Each comparison pairs the two designs instance by instance
+(:func:`compare.statistics.paired_difference`): the median difference a − b of
+their best costs within the budget (LQR-normalized; negative: a is better), a
+distribution-free 95 % interval for it, and an exact two-sided sign test on the
+wins (ties dropped), Holm-adjusted over every comparison of the report. A claim
+says one design "beats" the other only where the interval excludes 0 *and* the
+adjusted p < 0.05; an interval excluding 0 alone gives the direction, "not
+significant after Holm's correction"; with 5 instances or fewer no 95 % interval
+exists, and only counts are given.
+
+Simulated costs whose standard error stays above :data:`UNCERTAIN_RSE` of the cost
+are unresolved (rare divergent draws dominate them) and enter no claim: those
+designs are dropped before best costs are taken, and each comparison counts the
+instances this changed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import stats
+
+from .records import Records, as_records
+from .statistics import Paired, best_within, instances_by_panel, paired_difference
+from .styles import Style, style_for
+
+__all__ = ["UNCERTAIN_RSE", "BOUND_LABEL", "ALPHA", "Comparison", "is_unresolved", "unresolved", "is_sls_bound",
+           "select_comparisons", "holm", "sign_test"]
+
+#: Above this relative standard error a simulated cost is unresolved: not a number to compare
+#: at the third digit (in the shipped reports every such cost came from rare divergent draws).
+UNCERTAIN_RSE = 0.01
+#: The name of SLS on the complete graph at one hop per step, whatever its records' label.
+BOUND_LABEL = "SLS bound (complete graph)"
+#: Family-wise level of the Holm-adjusted sign tests.
+ALPHA = 0.05
+DEFAULT_BUDGETS = (20, 60, 140, None)
+
+# Learned designs with the delayed information model, in the order the findings list them.
+_LEARNED = ("grnn_sparse", "grnn", "grnn_dense", "grnn_fixed")
+_SLS = ("sls", "sls_topologies")
+_TOO_FEW_COLOUR = "#999999"
+#: Differences beyond this (in units of centralized LQR's cost) are off the forest plot's scale:
+#: drawn at its edge with their median printed.
+X_CAP = 10.0
+
+
+# --------------------------------------------------------------------------- records
+
+
+def is_unresolved(r) -> bool:
+    """A simulated design whose cost keeps a relative standard error above :data:`UNCERTAIN_RSE`."""
+    return (r.cost_kind == "simulated" and r.ok and r.cost > 0
+            and math.isfinite(r.cost_stderr) and r.cost_stderr > UNCERTAIN_RSE * r.cost)
+
+
+def unresolved(records) -> Records:
+    """The designs of ``records`` whose costs are unresolved (:func:`is_unresolved`)."""
+    return as_records(records).filter(is_unresolved)
+
+
+def is_sls_bound(r) -> bool:
+    """SLS on the complete graph at one hop per step, act_delay 1, no FIR truncation: the delayed bound.
+
+    Recognised by its hyperparameters, not its label: a topology family shares one
+    label among all its graphs.
+    """
+    p = r.params
+    return (r.method in _SLS and p.get("graph") == "complete" and p.get("act_delay") == 1
+            and p.get("speed") == 1 and p.get("fir") is None)
+
+
+def _linear(r) -> bool:
+    return r.params.get("activation") == "identity"
+
+
+def _arm_labels(records: Records) -> list[str]:
+    """The label each design is compared under (one per design, in order).
+
+    Its own label, except: the SLS bound is :data:`BOUND_LABEL`; a label shared by
+    tanh and linear GRNN designs is split by activation; a label shared by SLS
+    designs on several graphs is split by graph.
+    """
+    activations, graphs = {}, {}
+    for r in records:
+        if r.method.startswith("grnn"):
+            activations.setdefault(r.label, set()).add(_linear(r))
+        if r.method in _SLS:
+            graphs.setdefault(r.label, set()).add("bound" if is_sls_bound(r) else r.params.get("graph"))
+    out = []
+    for r in records:
+        if is_sls_bound(r):
+            out.append(BOUND_LABEL)
+        elif r.method.startswith("grnn") and len(activations[r.label]) > 1:
+            out.append(f"{r.label} ({'linear' if _linear(r) else 'tanh'})")
+        elif r.method in _SLS and len(graphs[r.label]) > 1:
+            out.append(f"{r.label}: {r.params.get('graph', 'plant')} graph")
+        else:
+            out.append(r.label)
+    return out
+
+
+@dataclass(frozen=True)
+class _Arm:
+    """One side of a comparison: a label and what its designs are."""
+
+    label: str
+    method: str
+    linear: bool
+    graph: str | None
+    info_model: str
+    original: str
+    style: Style
+
+
+def _arms(records: Records, labels: list[str]) -> dict[str, _Arm]:
+    grouped: dict[str, list] = {}
+    for r, label in zip(records, labels):
+        grouped.setdefault(label, []).append(r)
+    out = {}
+    for label, rs in grouped.items():
+        first = rs[0]
+        info = Counter(r.info_model or "?" for r in rs).most_common(1)[0][0]
+        out[label] = _Arm(label, first.method, _linear(first), first.params.get("graph"), info, first.label,
+                          style_for(first.method, first.params, info))
+    return out
+
+
+# --------------------------------------------------------------------------- comparisons
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Design ``a`` against design ``b`` on one panel within one link budget.
+
+    Parameters
+    ----------
+    panel : tuple
+        :func:`compare.records.panel_key` of the instances.
+    a, b : str
+        Labels; the difference is a − b (negative: a is better).
+    budget : float or None
+        Largest number of directed off-diagonal links; None: any.
+    paired : Paired
+        Median difference, its distribution-free interval, wins, instances.
+    relation : {"same", "cross"}
+        Whether both designs use the same information model.
+    info_a, info_b : str
+        Their information models.
+    p_value : float
+        Exact two-sided sign test on the wins (ties dropped); 1 without any win.
+    p_holm : float
+        ``p_value`` Holm-adjusted over every comparison of the report.
+    excluded : int
+        Instances whose pairing changed because unresolved costs were dropped: the
+        instance left the comparison, or a side is represented by its best resolved
+        design instead.
+    group : str
+        The heading it is drawn and listed under.
+    panel_instances : int
+        Instances of the panel.
+    method_a, method_b : str
+        The methods of a's and b's designs.
+    style_a : Style or None
+        a's style from what its designs are (:func:`compare.styles.style_for`): the
+        figure's fallback for labels split here, which a report's label styles lack.
+    """
+
+    panel: tuple
+    a: str
+    b: str
+    budget: float | None
+    paired: Paired
+    relation: str
+    info_a: str
+    info_b: str
+    p_value: float
+    p_holm: float
+    excluded: int = 0
+    group: str = ""
+    panel_instances: int = 0
+    method_a: str = ""
+    method_b: str = ""
+    style_a: Style | None = None
+
+    @property
+    def too_few(self) -> bool:
+        """Too few instances for a 95 % interval: only counts may be stated."""
+        return self.paired.too_few
+
+    @property
+    def significant(self) -> bool:
+        """The interval excludes 0 and the Holm-adjusted sign test rejects at :data:`ALPHA`."""
+        return not self.too_few and not self.paired.inconclusive and self.p_holm < ALPHA
+
+    @property
+    def verdict(self) -> str:
+        """"better" or "worse" (a against b), "no significant difference", or "too few"."""
+        if self.too_few:
+            return "too few"
+        if not self.significant:
+            return "no significant difference"
+        return "better" if self.paired.high < 0 else "worse"
+
+
+def sign_test(a_wins: int, b_wins: int) -> float:
+    """Exact two-sided sign test of equal win probabilities (ties already dropped); 1 without any win."""
+    n = a_wins + b_wins
+    return float(stats.binomtest(a_wins, n, 0.5).pvalue) if n else 1.0
+
+
+def holm(p_values: Sequence[float]) -> list[float]:
+    """Holm's step-down adjustment of ``p_values`` (same order): controls the family-wise error rate."""
+    p = np.asarray(p_values, dtype=float)
+    m = p.size
+    order = np.argsort(p, kind="stable")
+    adjusted = np.empty(m)
+    running = 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * p[i]))
+        adjusted[i] = running
+    return adjusted.tolist()
+
+
+def _resolve(name: str, arms: Mapping[str, _Arm]) -> list[str]:
+    """Arm labels a spec's pair entry means: a label, a label split here, or a method name."""
+    if name in arms:
+        return [name]
+    split = [a.label for a in arms.values() if a.original == name]
+    return split or [a.label for a in arms.values() if a.method == name][:1]
+
+
+def _plan(arms: Mapping[str, _Arm], budgets: tuple, pairs: Iterable) -> list[tuple[str, str, tuple, str]]:
+    """(a, b, budgets, group) of every comparison asked, in the order the findings list them."""
+    def by_method(*methods, linear=None):
+        return [a.label for a in arms.values()
+                if a.method in methods and (linear is None or a.linear == linear) and a.label != BOUND_LABEL]
+
+    learned = sorted(by_method(*_LEARNED), key=lambda x: (_LEARNED.index(arms[x].method), arms[x].linear, x))
+    static_delayed = by_method("sparse_delayed")
+    same = "same information model: delayed"
+    plan = [(a, b, budgets, same) for a in learned for b in static_delayed]
+    plan += [(a, b, budgets, same) for a in by_method("grnn_sparse", linear=True)
+             for b in by_method("grnn_sparse", linear=False)]
+    if BOUND_LABEL in arms:
+        plant_sls = [a.label for a in arms.values() if a.method in _SLS and a.graph == "plant"
+                     and a.label != BOUND_LABEL]
+        plan += [(a, BOUND_LABEL, (None,), "same information model: delayed, against the SLS bound")
+                 for a in learned + static_delayed + plant_sls]
+    instantaneous = by_method("sparse_admm") or by_method("sparse_sdp")
+    tanh_sparse = by_method("grnn_sparse", linear=False)
+    cross = [(a, b, budgets) for a in tanh_sparse for b in instantaneous]
+    cross += [(a, b, budgets) for a in tanh_sparse for b in by_method("decentralized")]
+    cross += [(a, b, (None,)) for a in by_method("gcnn") for b in instantaneous]
+    plan += [(a, b, bs, _group(arms[a].info_model, arms[b].info_model)) for a, b, bs in cross]
+    asked = {(a, b) for a, b, _, _ in plan}
+    for first, second in pairs:
+        for a in _resolve(first, arms):
+            for b in _resolve(second, arms):
+                if a != b and (a, b) not in asked and (b, a) not in asked:
+                    asked.add((a, b))
+                    plan.append((a, b, budgets, _group(arms[a].info_model, arms[b].info_model)))
+    return plan
+
+
+def _group(info_a: str, info_b: str) -> str:
+    if info_a == info_b:
+        return f"same information model: {info_a}"
+    return f"crosses models: {info_a} against {info_b}"
+
+
+def _group_rank(group: str) -> tuple:
+    """Delayed-information claims first (same model, then against the bound), other same-model ones, cross last.
+
+    (Ties keep the plan's order: the sort is stable.)
+    """
+    if group == "same information model: delayed":
+        return (0,)
+    if "bound" in group:
+        return (1,)
+    if group.startswith("same information model:"):
+        return (2,)
+    return (3,)
+
+
+def _tables(records: Records, labels: list[str], panels: dict, grid: np.ndarray) -> dict:
+    grouped: dict[tuple, list] = {}
+    for r, label in zip(records, labels):
+        grouped.setdefault((r.instance.panel, label), []).append(r)
+    return {key: best_within(Records(rs), panels[key[0]], grid) for key, rs in grouped.items()}
+
+
+def select_comparisons(records, *, budgets=DEFAULT_BUDGETS, pairs=()) -> list[Comparison]:
+    """The comparisons a researcher asks of these data, per panel and budget, with Holm-adjusted sign tests.
+
+    Parameters
+    ----------
+    records : Records or iterable of dict
+    budgets : tuple of (float or None)
+        Link budgets; None: any number of links. Comparisons against the SLS bound
+        and of the GCNN use "any" alone.
+    pairs : iterable of (str, str)
+        Extra (first, second) pairs (labels or method names, as a spec's
+        ``report.pairs``), compared within every budget.
+
+    Returns
+    -------
+    list of Comparison
+        Grouped as the findings list them (same-model delayed claims first), then by
+        pair, panel and budget. Pairs with no instance where both have a design
+        within the budget are left out.
+    """
+    records = as_records(records)
+    labels = _arm_labels(records)
+    arms = _arms(records, labels)
+    panels = instances_by_panel(records)
+    grid = np.array([np.inf if b is None else float(b) for b in budgets])
+    column = {b: k for k, b in enumerate(budgets)}
+    full = _tables(records, labels, panels, grid)
+    keep = [not is_unresolved(r) for r in records]
+    kept = _tables(Records(r for r, k in zip(records, keep) if k), [x for x, k in zip(labels, keep) if k],
+                   panels, grid)
+    plan = sorted(_plan(arms, tuple(budgets), pairs), key=lambda item: _group_rank(item[3]))
+    out = []
+    for a, b, pair_budgets, group in plan:
+        for panel in panels:
+            if (panel, a) not in full or (panel, b) not in full:
+                continue
+            for budget in pair_budgets:
+                if budget not in column:
+                    continue
+                k = column[budget]
+                out_k = _compare(a, b, budget, [kept.get((panel, x)) for x in (a, b)],
+                                 [full[(panel, x)] for x in (a, b)], k)
+                if out_k is None:
+                    continue
+                paired, excluded = out_k
+                ia, ib = arms[a].info_model, arms[b].info_model
+                out.append(Comparison(panel, a, b, budget, paired, "same" if ia == ib else "cross", ia, ib,
+                                      sign_test(paired.a_wins, paired.b_wins), 1.0, excluded, group,
+                                      len(panels[panel]), arms[a].method, arms[b].method, arms[a].style))
+    adjusted = holm([c.p_value for c in out])
+    return [replace(c, p_holm=p) for c, p in zip(out, adjusted)]
+
+
+def _compare(a, b, budget, kept, full, k):
+    """(Paired, instances changed by dropping unresolved costs), or None where no instance has both."""
+    fa, fb = (t[:, k] for t in full)
+    ka, kb = (t[:, k] if t is not None else np.full(fa.shape, np.nan) for t in kept)
+    with np.errstate(invalid="ignore"):
+        paired = paired_difference(a, b, ka, kb, budget)
+        both_full = np.isfinite(fa) & np.isfinite(fb)
+        same = np.isfinite(ka) & np.isfinite(kb) & (ka == fa) & (kb == fb)
+    if not paired.instances:
+        return None
+    return paired, int((both_full & ~same).sum())

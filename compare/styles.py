@@ -1,0 +1,172 @@
+"""One visual identity for every figure of every report: each method's colour and marker.
+
+A method keeps its colour and marker in every figure and every report, because
+the style is looked up from what the design *is* (its method, and the one
+hyperparameter that makes a different kind of design: the activation of a GRNN,
+the graph of an SLS design), never from its position in a list of labels.
+Colours come in families by information model, from the colour-blind safe
+palettes of Okabe & Ito and of Paul Tol:
+
+- instantaneous (zero-delay links): blues and teals;
+- delayed (one step per hop, the GRNN's model): reds, oranges and purples;
+- no communication: greens and greys.
+
+A plug-in method gets a stable colour and marker derived from its name (a hash,
+not the order in which methods happen to appear), from colours no built-in uses.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+__all__ = ["Style", "INFO_MODELS", "INFO_ORDER", "METHOD_STYLES", "style_key", "style_for", "label_styles",
+           "REFERENCE_COLOUR", "BOUND_COLOUR"]
+
+#: Information model -> (matplotlib line style, plotly dash, description). The line style of
+#: every curve drawn for a method is its information model's.
+INFO_MODELS = {
+    "instantaneous": ("-", "solid", "instantaneous (zero-delay links)"),
+    "delayed": ("--", "dash", "delayed (one step per hop)"),
+    "none": (":", "dot", "no communication"),
+}
+#: Order of the legend's groups.
+INFO_ORDER = ("delayed", "instantaneous", "none")
+
+#: The centralized-LQR = 1 reference line: lighter than any method's colour.
+REFERENCE_COLOUR = "#BBBBBB"
+#: A lower bound (SLS on the complete graph) drawn as a line.
+BOUND_COLOUR = "#000000"
+
+
+@dataclass(frozen=True)
+class Style:
+    """How one method is drawn: colour (hex), matplotlib marker, and its information model's line style."""
+
+    colour: str
+    marker: str
+    info_model: str = "instantaneous"
+
+    @property
+    def linestyle(self) -> str:
+        return INFO_MODELS.get(self.info_model, INFO_MODELS["instantaneous"])[0]
+
+    @property
+    def dash(self) -> str:
+        """The plotly dash of the information model's line style."""
+        return INFO_MODELS.get(self.info_model, INFO_MODELS["instantaneous"])[1]
+
+    @property
+    def plotly_symbol(self) -> str:
+        return _PLOTLY_SYMBOLS.get(self.marker, "circle")
+
+    @property
+    def face(self) -> str:
+        """Marker face colour: white for the variants drawn hollow (:data:`HOLLOW`), else the colour."""
+        return "white" if (self.colour, self.marker) in _HOLLOW_PAIRS else self.colour
+
+    # A Style unpacks as (colour, marker), as the figures' older label -> (colour, marker) tables did.
+    def __iter__(self):
+        return iter((self.colour, self.marker))
+
+    def __getitem__(self, i):
+        return (self.colour, self.marker)[i]
+
+    def __len__(self):
+        return 2
+
+
+#: Style key -> (colour, marker, information model) of every built-in method.
+METHOD_STYLES: dict[str, tuple[str, str, str]] = {
+    # instantaneous: blues and teals
+    "lqr": ("#000000", "*", "instantaneous"),
+    "sparse_admm": ("#0072B2", "o", "instantaneous"),
+    "sparse_sdp": ("#56B4E9", "s", "instantaneous"),
+    "truncated_lqr": ("#332288", "D", "instantaneous"),
+    "gcnn": ("#44AA99", "P", "instantaneous"),
+    # delayed: reds, oranges, purples
+    "grnn_sparse": ("#D55E00", "o", "delayed"),
+    "grnn_sparse_linear": ("#E69F00", "s", "delayed"),
+    "sparse_delayed": ("#CC79A7", "D", "delayed"),
+    "grnn": ("#882255", "^", "delayed"),
+    "grnn_linear": ("#882255", "v", "delayed"),
+    "grnn_dense": ("#AA4499", "v", "delayed"),
+    "grnn_fixed": ("#EE6677", "<", "delayed"),
+    "sls_complete": ("#661100", "X", "delayed"),
+    "sls_plant": ("#AA3377", "p", "delayed"),
+    "sls_plant^2": ("#AA3377", "h", "delayed"),
+    "sls_plant^3": ("#AA3377", "H", "delayed"),
+    "sls_given": ("#EE3377", "d", "delayed"),
+    "sls_path": ("#994455", "8", "delayed"),
+    # no communication: greens and greys
+    "decentralized": ("#117733", "h", "none"),
+    "autonomous": ("#555555", "x", "none"),
+}
+
+#: Variants drawn with hollow markers, so that a filled marker they coincide with shows through
+#: (the linear GRNN-Sparse path lies on the tanh one within a percent).
+HOLLOW = ("grnn_sparse_linear", "grnn_linear", "sls_plant^2", "sls_plant^3")
+_HOLLOW_PAIRS = {METHOD_STYLES[k][:2] for k in HOLLOW}
+
+# Colours no built-in method uses, for plug-ins (Tol's muted and light schemes).
+_SPARE_COLOURS = ("#88CCEE", "#DDCC77", "#999933", "#6699CC", "#997700", "#BBCC33", "#77AADD", "#EEDD88",
+                  "#FFAABB", "#99DDFF", "#44BB99", "#AAAA00")
+_SPARE_MARKERS = ("o", "s", "D", "^", "v", "P", "X", "<", ">", "h", "*", "p")
+
+_PLOTLY_SYMBOLS = {"o": "circle", "s": "square", "D": "diamond", "d": "diamond-tall", "^": "triangle-up",
+                   "v": "triangle-down", "<": "triangle-left", ">": "triangle-right", "P": "cross", "X": "x",
+                   "x": "x-thin-open", "*": "star", "p": "pentagon", "h": "hexagon", "H": "hexagon2",
+                   "8": "octagon"}
+
+
+def style_key(method: str, params: Mapping | None = None) -> str:
+    """The key of :data:`METHOD_STYLES` for a design of ``method`` with hyperparameters ``params``.
+
+    The activation of a GRNN (identity: a linear controller) and the graph of an SLS
+    design make different kinds of design; other hyperparameters (γ, β, steps) do not.
+    """
+    params = params or {}
+    if method.startswith("grnn") and params.get("activation") == "identity":
+        return f"{method}_linear"
+    if method in ("sls", "sls_topologies"):
+        return f"sls_{params.get('graph', 'plant')}"
+    return method
+
+
+def _spare(key: str) -> tuple[str, str]:
+    digest = int(hashlib.sha256(key.encode()).hexdigest(), 16)
+    return _SPARE_COLOURS[digest % len(_SPARE_COLOURS)], _SPARE_MARKERS[(digest // 97) % len(_SPARE_MARKERS)]
+
+
+def style_for(method: str, params: Mapping | None = None, info_model: str | None = None) -> Style:
+    """The :class:`Style` of a design: the built-in table's, or a stable one derived from the name."""
+    key = style_key(method, params)
+    if key in METHOD_STYLES:
+        colour, marker, info = METHOD_STYLES[key]
+        return Style(colour, marker, info_model or info)
+    colour, marker = _spare(key)
+    return Style(colour, marker, info_model or "instantaneous")
+
+
+def label_styles(records: Iterable) -> dict[str, Style]:
+    """Label -> :class:`Style` for the labels of ``records`` (each label styled by its first design).
+
+    ``records``: :class:`~compare.records.Records` or any iterable of objects with
+    ``label``, ``method``, ``params`` and ``info_model``. Two labels of the same kind of
+    design in one report (say, one method run with two settings under two labels) share
+    the colour; the second gets another marker so that both stay apart.
+    """
+    out: dict[str, Style] = {}
+    used: dict[tuple, str] = {}
+    for r in records:
+        if r.label in out:
+            continue
+        style = style_for(r.method, r.params, r.info_model)
+        if (style.colour, style.marker) in used:
+            taken = {s.marker for s in out.values() if s.colour == style.colour}
+            free = [m for m in _SPARE_MARKERS if m not in taken]
+            style = Style(style.colour, free[0] if free else style.marker, style.info_model)
+        used[(style.colour, style.marker)] = r.label
+        out[r.label] = style
+    return out

@@ -1,0 +1,306 @@
+"""Findings: which comparisons are asked, their sign tests and Holm adjustment, the text, and the forest plot."""
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pytest  # noqa: E402
+from matplotlib.colors import to_hex  # noqa: E402
+
+from dataclasses import replace  # noqa: E402
+
+from compare.findings import BOUND_LABEL, Comparison, holm, is_sls_bound, select_comparisons, unresolved  # noqa: E402
+from compare.findings_text import findings_markdown  # noqa: E402
+from compare.forest import plot_forest  # noqa: E402
+from compare.records import Records  # noqa: E402
+from compare.statistics import Paired  # noqa: E402
+from compare.styles import label_styles  # noqa: E402
+
+SD, TANH, LINEAR, GRNN = "Sparse K, delayed (l1)", "GRNN-Sparse", "Linear GRNN-Sparse", "GRNN"
+ADMM, DEC, SLS = "Sparse K (l1 ADMM)", "Decentralized", "SLS (topology family)"
+SLS_PARAMS = {"act_delay": 1, "fir": None, "horizon": 50, "speed": 1.0}
+
+
+def _inst(seed, a_norm=1.05):
+    return {"family": "paper", "n": 8, "a_norm": a_norm, "seed": seed}
+
+
+def _rec(inst, method, label, links, cost, *, info="delayed", params=None, kind="exact", stderr=0.0):
+    return {"instance": inst, "method": method, "label": label, "params": params or {}, "links": links,
+            "self_loops": 8, "cost": cost, "cost_stderr": stderr, "cost_kind": kind, "status": "optimal",
+            "info_model": info, "run_key": f"{label}|{inst['seed']}|{links}|{cost}", "idx": 0}
+
+
+def _designs(inst, i):
+    """One instance's designs: the delayed static gain beats GRNN-Sparse by 0.1 everywhere; linear and tanh
+    GRNN-Sparse alternate by 0.001; SLS on the complete graph is 0.05 below the static gain."""
+    base = 0.01 * i
+    return [
+        _rec(inst, "grnn_sparse", TANH, 10, 1.20 + base, kind="simulated", stderr=1e-5),
+        _rec(inst, "grnn_sparse", LINEAR, 10, 1.20 + base + (0.001 if i % 2 else -0.001),
+             params={"activation": "identity"}),
+        _rec(inst, "grnn", GRNN, 30, 1.15 + base, kind="simulated", stderr=1e-5),
+        _rec(inst, "sparse_delayed", SD, 10, 1.10 + base),
+        # Two graphs of one topology family under one label: the bound is told apart by its params.
+        _rec(inst, "sls_topologies", SLS, 56, 1.05 + base, params={**SLS_PARAMS, "graph": "complete"}),
+        _rec(inst, "sls_topologies", SLS, 20, 1.08 + base, params={**SLS_PARAMS, "graph": "plant"}),
+        _rec(inst, "decentralized", DEC, 0, 1.30 + base, info="none"),
+        _rec(inst, "sparse_admm", ADMM, 10, 1.00 + base, info="instantaneous"),
+    ]
+
+
+N = 12
+
+
+@pytest.fixture(scope="module")
+def records():
+    rows = []
+    for i in range(N):
+        rows += _designs(_inst(i), i)
+    # Unresolved costs: on seed 0 a GRNN-Sparse design that would beat the static gain; on seed 1 GRNN's only design.
+    rows.append(_rec(_inst(0), "grnn_sparse", TANH, 15, 0.90, kind="simulated", stderr=0.05 * 0.90))
+    rows = [r for r in rows if not (r["label"] == GRNN and r["instance"]["seed"] == 1)]
+    rows.append(_rec(_inst(1), "grnn", GRNN, 30, 1.16, kind="simulated", stderr=0.02 * 1.16))
+    return Records.from_rows(rows)
+
+
+@pytest.fixture(scope="module")
+def comparisons(records):
+    return select_comparisons(records)
+
+
+def _find(comparisons, a, b, budget="all"):
+    out = [c for c in comparisons if c.a == a and c.b == b and (budget == "all" or c.budget == budget)]
+    assert out, f"no comparison {a} − {b}"
+    return out
+
+
+def test_holm_matches_a_hand_computation():
+    # sorted: 0.005 (x4 = 0.02), 0.01 (x3 = 0.03), 0.03 (x2 = 0.06), 0.04 (x1 = 0.04, kept monotone: 0.06)
+    assert holm([0.01, 0.04, 0.03, 0.005]) == pytest.approx([0.03, 0.06, 0.06, 0.02])
+    assert holm([0.5, 0.9]) == pytest.approx([1.0, 1.0])  # capped at 1
+    assert holm([]) == []
+
+
+def test_a_design_better_on_every_instance_is_better_with_exact_and_holm_adjusted_p(comparisons):
+    cells = _find(comparisons, TANH, SD)
+    assert [c.budget for c in cells] == [20, 60, 140, None]
+    k = len(comparisons)
+    for c in cells:
+        assert c.relation == "same" and c.info_a == c.info_b == "delayed"
+        assert c.paired.instances == N and c.paired.b_wins == N
+        assert c.paired.median == pytest.approx(0.1)
+        assert c.p_value == pytest.approx(2 * 0.5 ** N)  # exact two-sided sign test, 12 of 12
+        # the smallest p of the report, tied K-fold at most: Holm multiplies it by K
+        assert c.p_holm == pytest.approx(min(1.0, k * 2 * 0.5 ** N))
+        assert c.verdict == "worse" and c.significant
+    assert [c.p_holm for c in comparisons] == pytest.approx(holm([c.p_value for c in comparisons]))
+
+
+def _bullets(lines):
+    return [line for line in lines if line.startswith("- ")]
+
+
+def test_the_first_finding_is_the_delayed_result(comparisons, records):
+    lines = findings_markdown(comparisons, excluded_total=len(unresolved(records)))
+    assert lines[:2] == ["## Findings", ""] and lines[2].startswith("- **")  # with power, the first sentence is a claim
+    assert "![forest plot](forest.png)" in lines  # the figure the claims come from, after them
+    bullets = _bullets(lines)
+    # the winner first, in bold, then the information models and where it holds
+    assert bullets[0].startswith(f"- **{SD} beats {TANH}** (both delayed) at ≤ 20, ≤ 60 and ≤ 140 links and overall:")
+    assert f"{TANH} costs +0.10 more" in bullets[0]
+    assert "Holm p ≤" in bullets[0] and "n = 12 per cell, ≤ 1 re-paired" in bullets[0]
+    # one bullet per pair, the bound after same-model claims, cross-model ones last
+    order = [i for i, b in enumerate(bullets) if f"the {BOUND_LABEL}**" in b]
+    cross = [i for i, b in enumerate(bullets) if "(crosses models:" in b]
+    assert order and cross and max(order) < min(cross)
+    assert len(bullets) == len({(c.a, c.b) for c in comparisons})
+    # short: a researcher reads each in seconds
+    assert all(len(b.split()) <= 60 for b in bullets), max(bullets, key=lambda b: len(b.split()))
+    statistics = lines[-2]
+    assert statistics.startswith("Statistics:") and len(statistics.split()) <= 75
+    assert "2 unresolved simulated costs" in statistics and f"K = {len(comparisons)} comparisons" in statistics
+    # the three verdicts are defined there, once
+    assert all(statistics.count(word) == 1 for word in ("**Beats**", "**costs more/less**", "**no clear difference**"))
+    # without the count, the line still says that unresolved costs were dropped, never that there were none
+    changed = sum(c.excluded for c in comparisons)
+    assert f"re-pairing {changed} instances" in findings_markdown(comparisons)[-2]
+
+
+def test_no_clear_difference_where_wins_split(comparisons):
+    cells = _find(comparisons, LINEAR, TANH)
+    assert all(c.paired.a_wins == c.paired.b_wins == N // 2 for c in cells[1:])
+    assert all(c.verdict == "no significant difference" for c in cells)
+    (bullet,) = [b for b in _bullets(findings_markdown(comparisons)) if f"{LINEAR} and {TANH}" in b]
+    assert bullet.startswith(f"- **No clear difference between {LINEAR} and {TANH}** (both delayed)")
+    assert "beats" not in bullet and "costs more than" not in bullet and "costs less than" not in bullet
+
+
+def test_an_unresolved_cost_is_excluded_and_counted(records, comparisons):
+    assert len(unresolved(records)) == 2
+    # GRNN-Sparse's unresolved 0.90 would have won on seed 0: dropped, its resolved 1.20 is compared instead
+    for c in _find(comparisons, TANH, SD):
+        assert c.excluded == 1 and c.paired.a_wins == 0
+    # GRNN's only design on seed 1 is unresolved: that instance leaves the comparison
+    for c in _find(comparisons, GRNN, SD):
+        assert c.paired.instances == N - 1 and c.excluded == 1
+    assert [c.budget for c in _find(comparisons, GRNN, SD)] == [60, 140, None]  # none within 20 links
+    # a pair untouched by unresolved costs counts none
+    assert all(c.excluded == 0 for c in _find(comparisons, SD, BOUND_LABEL))
+
+
+def test_the_bound_is_recognised_by_its_params_under_a_shared_label(records, comparisons):
+    assert sum(is_sls_bound(r) for r in records) == N
+    assert not any(SLS == c.a or SLS == c.b for c in comparisons)  # the mixed label is never compared whole
+    (bound,) = _find(comparisons, SD, BOUND_LABEL)
+    assert bound.budget is None and bound.paired.median == pytest.approx(0.05)
+    assert bound.group.endswith("against the SLS bound")
+    (plant,) = _find(comparisons, f"{SLS}: plant graph", BOUND_LABEL)
+    assert plant.paired.median == pytest.approx(0.03)
+    for a in (TANH, LINEAR, GRNN):
+        assert _find(comparisons, a, BOUND_LABEL)[0].verdict == "worse"
+    text = "\n".join(findings_markdown(comparisons))
+    # the body names it short, once the headline has named it in full
+    assert f"- **{SD} is beaten by the {BOUND_LABEL}** (both delayed) overall: Sparse K, delayed costs +0.050 " \
+        "more" in text
+
+
+def test_cross_model_comparisons_are_marked_cross(comparisons):
+    for b, info in ((ADMM, "instantaneous"), (DEC, "none")):
+        cells = _find(comparisons, TANH, b)
+        assert len(cells) == 4 and all(c.relation == "cross" and c.info_b == info for c in cells)
+    assert not [c for c in comparisons if c.a == LINEAR and c.b in (ADMM, DEC)]  # tanh only
+    text = "\n".join(findings_markdown(comparisons))
+    assert f"- **{ADMM} beats {TANH}** (crosses models: delayed vs instantaneous)" in text
+    assert f"- **{TANH} beats {DEC}** (crosses models: delayed vs no communication)" in text
+
+
+def test_pairs_a_spec_asks_for_resolve_method_names_and_skip_absent_methods(records):
+    comparisons = select_comparisons(records, pairs=[("decentralized", "sparse_admm"), ("gcnn", "lqr")])
+    cells = _find(comparisons, DEC, ADMM)
+    assert [c.budget for c in cells] == [20, 60, 140, None] and cells[0].relation == "cross"
+    assert not [c for c in comparisons if "gcnn" in (c.a, c.b)]
+    # asking for a pair already compared adds nothing
+    again = select_comparisons(records, pairs=[(SD, TANH)])
+    assert len(again) == len(select_comparisons(records))
+
+
+def _unanimous(n, budgets=(20, 60, 140, None)):
+    """GRNN-Sparse costs 0.1 more than the delayed static gain on each of ``n`` instances."""
+    rows = []
+    for i in range(n):
+        rows += [_rec(_inst(i), "grnn_sparse", TANH, 10, 1.2 + 0.01 * i),
+                 _rec(_inst(i), "sparse_delayed", SD, 10, 1.1 + 0.01 * i)]
+    return select_comparisons(Records.from_rows(rows), budgets=budgets)
+
+
+def test_an_interval_excluding_0_is_no_claim_unless_the_holm_adjusted_test_agrees():
+    comparisons = _unanimous(7)  # 7 of 7 wins: p = 2 / 128 = 0.016, four budgets: Holm 4 p = 0.0625
+    assert len(comparisons) == 4
+    for c in comparisons:
+        assert c.paired.low > 0 and not c.too_few and c.p_value == pytest.approx(2 / 128)
+        assert c.p_holm == pytest.approx(4 * 2 / 128) and c.verdict == "no significant difference"
+    lines = findings_markdown(comparisons)
+    (bullet,) = _bullets(lines)
+    # the direction leads, and the text says why it is no claim
+    assert bullet.startswith(f"- **{TANH} costs more than {SD} on 7 of 7 instances** (both delayed) at ≤ 20, ≤ 60 "
+                             "and ≤ 140 links and overall, +0.10; not significant after Holm's correction over K = 4 "
+                             f"comparisons (Holm p ≥ {4 * 2 / 128:.2g})")
+    assert "beats" not in bullet and "no clear difference" not in bullet.lower()
+    # no sign test on 7 instances passes Holm over 4: said once, before the claims
+    assert any("none can pass Holm's correction over K = 4 comparisons" in line for line in lines)
+    fig, axes = plot_forest(comparisons, {})
+    assert all(to_hex(m.get_markerfacecolor()) == "#ffffff" for m in axes[0].lines if m.get_gid() == "forest-median")
+    plt.close(fig)
+
+
+def test_ten_of_ten_over_many_comparisons_gives_the_direction_never_no_difference():
+    rows = []
+    for i in range(10):
+        rows += _designs(_inst(i), i)
+    comparisons = select_comparisons(Records.from_rows(rows))
+    k = len(comparisons)
+    assert k >= 26 and all(c.p_holm >= 0.05 for c in comparisons)  # 10 of 10: p = 2 / 1024, and 26 × p > 0.05
+    text = "\n".join(findings_markdown(comparisons))
+    (bullet,) = [b for b in _bullets(text.splitlines()) if b.startswith(f"- **{TANH} costs more than {SD} ")]
+    assert bullet.startswith(f"- **{TANH} costs more than {SD} on 10 of 10 instances** (both delayed)")
+    assert f"not significant after Holm's correction over K = {k} comparisons" in bullet
+    assert f"- **{TANH} costs more than the {BOUND_LABEL} on 10 of 10 instances**" in text
+    bullets = "\n".join(_bullets(text.splitlines()))
+    assert "no significant difference" not in text.lower() and " beats " not in bullets
+    assert "No clear difference" not in bullet
+
+
+def _cell(a_norm, budget, median, low, high, p_holm, *, n=30, a="A", b="B"):
+    """A hand-made comparison: ``a`` against ``b`` on one panel and budget."""
+    a_wins = n if high < 0 else 0
+    paired = Paired(a, b, budget, n, a_wins, n - a_wins, median, low, high, 0.99)
+    return Comparison(("paper", 8, a_norm), a, b, budget, paired, "same", "delayed", "delayed", p_holm / 10, p_holm,
+                      group="same information model: delayed", panel_instances=n)
+
+
+def test_a_claim_that_fails_in_one_cell_names_that_cell():
+    cells = [_cell(norm, budget, 0.05, 0.03, 0.07, 1e-6) for norm in (0.995, 1.1, 1.2) for budget in (20, None)]
+    cells[-2] = _cell(1.2, 20, 0.08, 0.026, 0.19, 0.13)  # interval excludes 0, Holm does not
+    cells[2] = _cell(1.1, 20, 0.018, 0.011, 0.023, 1e-4)  # the weakest claim
+    (bullet,) = _bullets(findings_markdown(cells))
+    assert bullet == ("- **B beats A** (both delayed) at ≤ 20 links and overall in every panel but one: A costs +0.018 "
+                      "to +0.050 more (weakest +0.018 [+0.011, +0.023], ‖A‖₂ = 1.1, ≤ 20 links; n = 30 per cell; "
+                      "Holm p ≤ 0.0001). Same direction, not significant after Holm's correction, at ≤ 20 links on "
+                      "‖A‖₂ = 1.2 (Holm p = 0.13).")
+
+
+def test_cells_against_the_headline_get_their_own_verdicts():
+    cells = [_cell(norm, None, -0.05, -0.07, -0.03, 1e-6) for norm in (0.995, 1.1)]
+    cells += [_cell(1.2, None, 0.04, 0.02, 0.06, 0.01),  # significant the other way
+              _cell(0.995, 20, 0.01, -0.01, 0.02, 1.0),  # interval contains 0
+              _cell(1.1, 20, 0.01, 0.005, 0.02, 0.2),  # the other way, not significant
+              replace(_cell(1.2, 20, 0.0, -0.1, 0.1, 1.0, n=4), paired=Paired("A", "B", 20, 4, 1, 3, 0.0, -0.1, 0.1,
+                                                                                0.88))]
+    (bullet,) = _bullets(findings_markdown(cells))
+    assert bullet.startswith("- **A beats B** (both delayed) overall on ‖A‖₂ = 0.995 and 1.1: B costs +0.050 more")
+    assert "But **B beats A** overall on ‖A‖₂ = 1.2 (+0.040; Holm p = 0.01)." in bullet
+    assert ("Opposite direction, not significant after Holm's correction, at ≤ 20 links on ‖A‖₂ = 1.1 "
+            "(Holm p = 0.2).") in bullet
+    assert "No clear difference at ≤ 20 links on ‖A‖₂ = 0.995." in bullet
+    assert bullet.endswith("Too few instances at ≤ 20 links on ‖A‖₂ = 1.2.")
+
+
+def test_too_few_instances_give_counts_only():
+    rows = []
+    for i in range(3):
+        rows += [_rec(_inst(i), "grnn_sparse", TANH, 10, 1.2 + 0.01 * i),
+                 _rec(_inst(i), "sparse_delayed", SD, 10, 1.1 + 0.01 * i)]
+    comparisons = select_comparisons(Records.from_rows(rows), budgets=(None,))
+    (c,) = comparisons
+    assert c.too_few and c.verdict == "too few" and not c.significant
+    (bullet,) = _bullets(findings_markdown(comparisons))
+    assert bullet.startswith(f"- **Too few instances to compare {TANH} and {SD}** (both delayed) overall: "
+                             f"{TANH} costs more on 3 of 3, with no 95 % interval")
+    assert "beats" not in bullet and "significant" not in bullet and "p ≤" not in bullet
+    fig, axes = plot_forest(comparisons, {})
+    (marker,) = [line for line in axes[0].lines if line.get_gid() == "forest-median"]
+    assert to_hex(marker.get_markeredgecolor()) == "#999999" and to_hex(marker.get_markerfacecolor()) == "#ffffff"
+    plt.close(fig)
+
+
+def test_forest_has_one_row_per_comparison_filled_where_significant(records, comparisons):
+    two_panels = list(records) + [r for i in range(N) for r in _designs(_inst(i, a_norm=1.2), i)]
+    comparisons = select_comparisons(Records(Records.from_rows(two_panels)))
+    styles = label_styles(Records.from_rows(two_panels))
+    fig, axes = plot_forest(comparisons, styles)
+    assert len(axes) == 2
+    for ax, panel in zip(axes, (("paper", 8, 1.05), ("paper", 8, 1.2))):
+        mine = [c for c in comparisons if c.panel == panel]
+        markers = [line for line in ax.lines if line.get_gid() == "forest-median"]
+        assert len(markers) == len(mine)
+        filled = [m for m in markers if to_hex(m.get_markerfacecolor()) != "#ffffff"]
+        assert len(filled) == sum(c.significant for c in mine) > 0
+        assert len(markers) - len(filled) == sum(not c.significant for c in mine) > 0
+        assert f"{N} instances" in ax.get_title()
+    # one y row per (pair, budget), shared by the panels
+    assert len(axes[0].get_yticks()) == len({(c.a, c.b, c.budget) for c in comparisons})
+    # colour is a's style; the bound's own colour where it is the first
+    tanh = [m for m in axes[0].lines if m.get_gid() == "forest-median" and m.get_marker() == styles[TANH].marker]
+    assert tanh and all(to_hex(m.get_markeredgecolor()) == styles[TANH].colour.lower() for m in tanh)
+    plt.close(fig)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .figures import (OFF_SCALE, draw_boundary, excess, excess_axis, finish_legend, legend_handles,
+from .figures import (OFF_SCALE, _y_limits, draw_boundary, shared_y, excess, excess_axis, finish_legend, legend_handles,
                       links_axis, method_gid, panel_grid, panel_heading)
 from .records import as_records
 from .styles import Style
@@ -189,21 +189,24 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
         fig = next(iter(axes.values())).figure
     per_node = len({p[1] for p in panels}) > 1
     designs = as_records(records).by_panel if records is not None else {}
+
+    def shown_costs(group):
+        return [p.cost[1] for p in group if p.ok and p.reached and p.cost[1] <= OFF_SCALE]
+
+    limits = _y_limits(shown_costs(points)) if shared_y(panels) else None
     for panel in panels:
         ax = axes[panel]
         usable = [p for p in points if p.panel == panel and p.ok > 0]
         if not usable:
             continue
         scale = panel[1] if per_node else 1.0
-        shown = [p for p in usable if p.reached and p.cost[1] <= OFF_SCALE]
-        top = max((p.cost[1] for p in shown), default=OFF_SCALE) - 1.0
-        low = min((float(excess(p.cost[1])) for p in shown), default=0.01)
+        bottom, top = limits or _y_limits(shown_costs(usable))
         right = max(p.links[2] for p in usable) / scale
         for label, rs in (designs[panel].by_label.items() if panel in designs else ()):
             ok = [r for r in rs if r.ok]
             if ok:
                 s = styles[label]
-                ax.scatter([r.links / scale for r in ok], excess([r.cost for r in ok]), s=7, color=s.colour,
+                ax.scatter([r.links / scale for r in ok], excess([r.cost for r in ok], bottom), s=7, color=s.colour,
                            marker=s.marker, alpha=0.18, linewidths=0, zorder=1)
         series = {label: sorted((p.x / scale, p.cost[1]) for p in usable if p.label == label and p.reached)
                   for label in labels}
@@ -222,14 +225,14 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
             off_scale += [(xi, yi, s.colour) for xi, yi in zip(x[~inside], y[~inside])]
             if not inside.any():
                 continue  # an empty line drawn unclipped would sit at the figure's origin and spoil the layout
-            ax.plot(x[inside], excess(y[inside]), color=s.colour, marker=s.marker,
-                    linestyle=s.linestyle if inside.sum() > 1 else "none", markersize=6.5 if len(x) == 1 else 5.5,
+            ax.plot(x[inside], excess(y[inside], bottom), color=s.colour, marker=s.marker,
+                    linestyle=s.linestyle if inside.sum() > 1 else "none", markersize=(6.5 if len(x) == 1 else 5.5) * (1.5 if s.marker == "*" else 1),
                     markerfacecolor=s.face, markeredgecolor="white" if s.face == s.colour else s.colour,
                     markeredgewidth=0.6 if s.face == s.colour else 1.2, linewidth=1.3, transform=transform,
                     # Single-setting methods over the paths whose ends they share (decentralized = γ = ∞).
                     zorder=6 if label.startswith("LQR") else 5 if len(x) == 1 else 4, clip_on=False,
                     gid=method_gid(label))
-        excess_axis(ax, low * 0.7, top * 1.3)
+        excess_axis(ax, bottom, top * 1.3)
         links_axis(ax, right, per_node=per_node)
         rows = _mark_off_scale(ax, off_scale, top * 1.3) if off_scale else 0
         ax.set_xlabel("directed off-diagonal links per node (median)" if per_node

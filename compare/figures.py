@@ -26,7 +26,7 @@ from .styles import BOUND_COLOUR, INFO_MODELS, INFO_ORDER, Style, label_styles  
 
 __all__ = ["LINESTYLES", "OFF_SCALE", "FLOOR", "excess", "excess_axis", "panel_grid", "panel_heading",
            "legend_handles", "finish_legend", "draw_boundary", "plot_budget_fronts", "label_styles", "method_gid",
-           "drawn_styles"]
+           "drawn_styles", "axis_floor"]
 
 #: Line style and description per information model (from :data:`compare.styles.INFO_MODELS`).
 LINESTYLES = {info: (style, text) for info, (style, _, text) in INFO_MODELS.items()}
@@ -37,9 +37,19 @@ OFF_SCALE = 2.0
 FLOOR = 1e-3
 
 
-def excess(cost):
-    """J/J_LQR − 1 for display: floored at :data:`FLOOR` (LQR itself is 0) and inf kept inf."""
-    return np.maximum(np.asarray(cost, dtype=float) - 1.0, FLOOR)
+def excess(cost, floor: float = FLOOR):
+    """J/J_LQR − 1 for display: floored at ``floor`` (LQR itself is 0) and inf kept inf."""
+    return np.maximum(np.asarray(cost, dtype=float) - 1.0, floor)
+
+
+def axis_floor(costs) -> float:
+    """The bottom of an excess-cost axis: a little below the lowest excess above :data:`FLOOR`.
+
+    Designs closer to LQR than that (LQR itself) are drawn on the bottom edge, so that an
+    axis whose other designs all lie above 5 % does not spend decades on LQR alone.
+    """
+    above = [float(c) - 1.0 for c in np.ravel(costs) if np.isfinite(c) and float(c) - 1.0 > FLOOR]
+    return max(FLOOR, 0.8 * min(above)) if above else FLOOR
 
 
 def _percent(value, _=None) -> str:
@@ -84,6 +94,19 @@ def panel_heading(panel: tuple, instances: int | None = None) -> str:
     return panel_title(panel) + (f" · {instances} instances" if instances else "")
 
 
+def shared_y(panels) -> bool:
+    """Whether :func:`panel_grid` lays the panels out as rows = N, columns = ‖A‖₂ (one cost axis for all)."""
+    sizes = {p[1] for p in panels}
+    norms = {p[2] for p in panels}
+    return len(sizes) > 1 and len(norms) > 1 and None not in norms
+
+
+def _y_limits(shown) -> tuple[float, float]:
+    """(bottom, top) of an excess-cost axis showing the costs ``shown`` (all at most OFF_SCALE)."""
+    shown = np.asarray(shown, dtype=float)
+    return axis_floor(shown), (float(shown.max()) if shown.size else OFF_SCALE) - 1.0
+
+
 def panel_grid(panels, *, width: float = 4.6, height: float = 3.9):
     """Axes for the panels: rows = N and columns = ‖A‖₂ when both vary (shared y), else up to 3 columns.
 
@@ -92,9 +115,9 @@ def panel_grid(panels, *, width: float = 4.6, height: float = 3.9):
     panels = sorted(panels)
     sizes = sorted({p[1] for p in panels})
     norms = sorted({p[2] for p in panels if p[2] is not None})
-    if len(sizes) > 1 and len(norms) > 1 and all(p[2] is not None for p in panels):
+    if shared_y(panels):
         fig, grid = plt.subplots(len(sizes), len(norms), figsize=(width * len(norms), height * len(sizes)),
-                                 squeeze=False, sharey=True)
+                                 squeeze=False)
         axes = {}
         for i, n in enumerate(sizes):
             for j, a in enumerate(norms):
@@ -206,26 +229,29 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
     else:
         fig = next(iter(axes.values())).figure
     per_node = len({p[1] for p in panels}) > 1
+
+    def shown_costs(group):
+        finite = np.concatenate([f.cost[1][np.isfinite(f.cost[1])] for f in group] + [np.array([])])
+        extra = [bounds[p][0] for p in {f.panel for f in group} if bounds and p in bounds]
+        finite = np.append(finite, extra)
+        return finite[finite <= OFF_SCALE]
+
+    limits = _y_limits(shown_costs(fronts)) if shared_y(panels) else None
     above, partial = {}, {}
     for panel in panels:
         ax = axes[panel]
         mine = [f for f in fronts if f.panel == panel]
         scale = panel[1] if per_node else 1.0
         right = max(float(f.budgets[-1]) for f in mine) / scale
-        finite = np.concatenate([f.cost[1][np.isfinite(f.cost[1])] for f in mine])
-        if finite.size == 0:
+        if not any(np.isfinite(f.cost[1]).any() for f in mine):
             continue
-        if bounds and panel in bounds:
-            finite = np.append(finite, bounds[panel][0])
-        shown = finite[finite <= OFF_SCALE]
-        top = (float(shown.max()) if shown.size else OFF_SCALE) - 1.0
-        low = float(excess(shown.min() if shown.size else OFF_SCALE))
+        bottom, top = limits or _y_limits(shown_costs(mine))
         for f in mine:
             s = _style(styles, f.label)
             x = np.append(f.budgets, max(right * scale, f.budgets[-1]) * 1.15 + 1) / scale
             q1, med, q3 = (np.append(row, row[-1]) for row in f.cost)
             # Not started (inf) leaves a gap, not a line off the axis.
-            q1, med, q3 = (np.where(np.isfinite(v), excess(v), np.nan) for v in (q1, med, q3))
+            q1, med, q3 = (np.where(np.isfinite(v), excess(v, bottom), np.nan) for v in (q1, med, q3))
             ax.step(x, med, where="post", color=s.colour, linestyle=s.linestyle, linewidth=1.5,
                     gid=method_gid(f.label))
             ax.fill_between(x, q1, q3, step="post", color=s.colour, alpha=0.08, linewidth=0)
@@ -233,15 +259,15 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
                 above.setdefault(panel, []).append(f"{f.label} ({np.nanmin(f.cost[1]):.3g})")
             elif f.start is not None:
                 k = int(np.searchsorted(f.budgets, f.start))
-                ax.plot(f.budgets[k] / scale, excess(f.cost[1][k]), marker=s.marker, color=s.colour,
-                        linestyle="none", markersize=6, markerfacecolor=s.face,
+                ax.plot(f.budgets[k] / scale, excess(f.cost[1][k], bottom), marker=s.marker, color=s.colour,
+                        linestyle="none", markersize=9 if s.marker == "*" else 6, markerfacecolor=s.face,
                         markeredgecolor="white" if s.face == s.colour else s.colour,
                         markeredgewidth=0.5 if s.face == s.colour else 1.2,
                         zorder=4 if f.label.startswith("LQR") or f.budgets.size == 1 else 3,
                         clip_on=bool(f.cost[1][k] - 1.0 > top * 1.25), gid=method_gid(f.label))
             if f.covered < f.instances:
                 partial.setdefault(panel, []).append(f"{f.label} ({f.covered} of {f.instances})")
-        excess_axis(ax, low * 0.8, top * 1.25)
+        excess_axis(ax, bottom, top * 1.25)
         links_axis(ax, right, per_node=per_node)
         ax.set_xlabel("link budget L per node" if per_node else "link budget L (directed off-diagonal links)")
         ax.set_ylabel("best excess cost over LQR")
@@ -252,8 +278,8 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
                      fontsize=9 if notes else 10)
         if bounds and panel in bounds:
             value, text = bounds[panel]
-            ax.axhline(excess(value), color=BOUND_COLOUR, linewidth=1.0, linestyle=(0, (4, 2, 1, 2)), zorder=1)
-            ax.text(0.01, excess(value), f" {text}", transform=ax.get_yaxis_transform(), ha="left", va="top",
+            ax.axhline(excess(value, bottom), color=BOUND_COLOUR, linewidth=1.0, linestyle=(0, (4, 2, 1, 2)), zorder=1)
+            ax.text(0.01, excess(value, bottom), f" {text}", transform=ax.get_yaxis_transform(), ha="left", va="top",
                     fontsize=7)
         if boundaries and panel in boundaries and any(f.info_model == "delayed" for f in mine):
             draw_boundary(ax, boundaries[panel] / scale)

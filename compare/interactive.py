@@ -194,7 +194,7 @@ def cost_links_figure(records, styles: Mapping, *, title: str | None = None) -> 
                     mode="lines+markers" if len(medians) > 1 else "markers", showlegend=False,
                     legendgroup=label, legendrank=entry["legendrank"],
                     line={"color": style.colour, "dash": style.dash, "width": 1.5},
-                    marker={"color": style.face, "symbol": style.plotly_symbol, "size": 10,
+                    marker={"color": "rgba(0, 0, 0, 0)" if style.face == "none" else style.face, "symbol": style.plotly_symbol, "size": 10,
                             "line": {"width": 1.2, "color": style.colour}},
                     text=[f"<b>{label}</b><br>median of {m[2].ok} designs: {_params_hover(m[2].params, varying[label])}"
                           f"<br>links {m[0]:g}<br>cost {m[1]:.5g}" for m in medians],

@@ -238,8 +238,8 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
             "there with at most L directed off-diagonal links. The curve is the median of that over the instances "
             "where the method has a design, from the budget at which every one of them has one (its marker); the "
             "band is the 25–75 % range across those instances (their spread, not the uncertainty of the median). "
-            "Line styles give the information model; designs within 0.1 % of LQR (LQR itself among them) sit on "
-            "the bottom edge.", "",
+            "Line styles give the information model; designs closer to LQR than the axis reaches (LQR itself "
+            "among them) sit on its bottom edge.", "",
         ]
         lines += _budget_tables(records)
     lines += _missing_lines(records, points, boundaries)

@@ -63,8 +63,8 @@ class Style:
 
     @property
     def face(self) -> str:
-        """Marker face colour: white for the variants drawn hollow (:data:`HOLLOW`), else the colour."""
-        return "white" if (self.colour, self.marker) in _HOLLOW_PAIRS else self.colour
+        """Marker face colour: "none" (see-through) for the variants drawn hollow (:data:`HOLLOW`), else the colour."""
+        return "none" if (self.colour, self.marker) in _HOLLOW_PAIRS else self.colour
 
     # A Style unpacks as (colour, marker), as the figures' older label -> (colour, marker) tables did.
     def __iter__(self):

@@ -237,7 +237,7 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
         return finite[finite <= OFF_SCALE]
 
     limits = _y_limits(shown_costs(fronts)) if shared_y(panels) else None
-    above, partial = {}, {}
+    above, partial, missing = {}, {}, {}
     for panel in panels:
         ax = axes[panel]
         mine = [f for f in fronts if f.panel == panel]
@@ -265,14 +265,17 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
                         markeredgewidth=0.5 if s.face == s.colour else 1.2,
                         zorder=4 if f.label.startswith("LQR") or f.budgets.size == 1 else 3,
                         clip_on=bool(f.cost[1][k] - 1.0 > top * 1.25), gid=method_gid(f.label))
-            if f.covered < f.instances:
+            if f.covered == 0:
+                missing.setdefault(panel, []).append(f.label)
+            elif f.covered < f.instances:
                 partial.setdefault(panel, []).append(f"{f.label} ({f.covered} of {f.instances})")
         excess_axis(ax, bottom, top * 1.25)
         links_axis(ax, right, per_node=per_node)
         ax.set_xlabel("link budget L per node" if per_node else "link budget L (directed off-diagonal links)")
         ax.set_ylabel("best excess cost over LQR")
         notes = [textwrap.fill(f"{head}: " + ", ".join(items[panel]), 60)
-                 for head, items in (("above the axis", above), ("designs on some instances only", partial))
+                 for head, items in (("above the axis", above), ("designs on some instances only", partial),
+                                     ("no usable design", missing))
                  if panel in items]
         ax.set_title("\n".join([panel_heading(panel, max(f.instances for f in mine))] + notes),
                      fontsize=9 if notes else 10)

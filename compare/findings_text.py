@@ -246,10 +246,18 @@ def _unclear_sentence(lead, cells, names) -> str:
 
 
 def _counts(cells: Sequence[Comparison], subject: str, side: int) -> str:
-    """"GRNN-Sparse costs more on 3 of 4 and 2 of 2": counts in ``side``'s direction (+1: more)."""
+    """"GRNN-Sparse costs more on 3 of 4 and 2 of 2", or for many cells a tally of the cells by direction."""
     word = "less" if side < 0 else "more"
-    shown = [f"{c.paired.a_wins if side < 0 else c.paired.b_wins} of {c.paired.instances}" for c in cells]
-    return f"{subject} costs {word} on {_join(shown)}"
+    if len(cells) <= 3:
+        shown = [f"{c.paired.a_wins if side < 0 else c.paired.b_wins} of {c.paired.instances}" for c in cells]
+        return f"{subject} costs {word} on {_join(shown)}"
+    same = sum(1 for c in cells if (c.paired.a_wins if side < 0 else c.paired.b_wins) == c.paired.instances)
+    other = sum(1 for c in cells if (c.paired.b_wins if side < 0 else c.paired.a_wins) == c.paired.instances)
+    most = max(c.paired.instances for c in cells)
+    text = f"{subject} costs {word} on every instance in {same} of {len(cells)} cells"
+    if other:
+        text += f", {'more' if side < 0 else 'less'} on every instance in {other}"
+    return text + f" (at most {most} instances per cell)"
 
 
 def _few_sentence(lead, names) -> str:

@@ -136,11 +136,8 @@ def panel_grid(panels, *, width: float = 4.6, height: float = 3.9):
     return fig, dict(zip(panels, flat))
 
 
-def legend_handles(styles: dict, labels, info_models=None, *, counts: dict | None = None) -> list:
-    """Legend entries grouped by information model: a heading per model, then its methods in its line style.
-
-    ``counts``: label -> text appended to the entry (e.g. "2 of 3 instances").
-    """
+def legend_handles(styles: dict, labels) -> list:
+    """Legend entries grouped by information model: a heading per model, then its methods in its line style."""
     handles = []
     for info in INFO_ORDER:
         mine = [lb for lb in labels if _style(styles, lb).info_model == info]
@@ -149,9 +146,8 @@ def legend_handles(styles: dict, labels, info_models=None, *, counts: dict | Non
         handles.append(Line2D([], [], linestyle="none", label=INFO_MODELS[info][2] + ":"))
         for lb in mine:
             s = _style(styles, lb)
-            extra = f" ({counts[lb]})" if counts and lb in counts else ""
             handles.append(Line2D([], [], color=s.colour, marker=s.marker, linestyle=s.linestyle, linewidth=1.4,
-                                  markersize=6, markerfacecolor=getattr(s, "face", s.colour), label=f"{lb}{extra}"))
+                                  markersize=6, markerfacecolor=getattr(s, "face", s.colour), label=lb))
     return handles
 
 

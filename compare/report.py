@@ -10,7 +10,6 @@ against links per setting, the detailed tables, the sections an experiment asks 
 
 from __future__ import annotations
 
-import json
 import textwrap
 from collections import Counter
 from dataclasses import replace
@@ -333,8 +332,3 @@ def _provenance_lines(records: Records, meta: dict, commands, superseded: int, s
     lines += ["", "## Software", "", "| package | version |", "|---|---|"]
     lines += [f"| {k} | {v} |" for k, v in software.items()]
     return lines + [""]
-
-
-def figure_styles(folder) -> dict:
-    """Figure stem -> label -> [(colour, marker), ...] as drawn, from a report folder's ``report.json``."""
-    return json.loads((Path(folder) / "report.json").read_text()).get("figures", {})

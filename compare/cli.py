@@ -19,7 +19,7 @@ __all__ = ["main"]
 #: Approximate wall time of ``compare run PRESET`` on 2 cores (2 workers), report included.
 #: A preset missing here is listed as "not measured".
 PRESET_TIMES = {
-    "quick": "~1.5 min (61 s measured before GRNN-Dense was added; its 20 runs took 32 s on a busy machine)",
+    "quick": "~1 min (61 s measured)",
     "baselines-small": "~20 s (16 s measured)",
     "sls-small": "~15 s (15 s measured)",
     "table1-small": "~40 s (38 s measured)",

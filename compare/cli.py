@@ -95,10 +95,9 @@ def _report(records, out: Path, *, meta: dict, members: dict, superseded: int, l
     commands = [v for k, v in sorted(meta.items()) if k.startswith("command:")]
     commands.append(f"compare report --out {out}")
     title = "Comparison report: " + ", ".join(sorted(specs)) if specs else "Comparison report"
-    # Versions are passed only when rebuilding: a report from the store prints the installed ones.
-    versions = {} if software is None else {"software": software}
+    # software is None from a store: the report prints the installed versions.
     return write_report(records, out, specs=specs, title=title, commands=commands, load_controller=load_controller,
-                        meta=meta, members=members, superseded=superseded, **versions)
+                        meta=meta, members=members, superseded=superseded, software=software)
 
 
 def _write_report(store, out: Path) -> dict:

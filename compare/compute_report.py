@@ -403,8 +403,8 @@ def _caption(instances: dict) -> str:
     )
 
 
-def compute_section(records: Records, out, files: dict, styles: dict, save) -> list[str]:
-    """The report's ``compute`` section: the figure (saved with ``save(fig, out, stem, files)``) and the table.
+def compute_section(records: Records, save, styles: dict) -> list[str]:
+    """The report's ``compute`` section: the figure (saved with ``save(fig, stem)``, as the other sections) and the table.
 
     ``styles``: label -> :class:`compare.styles.Style`; labels it lacks (or gives as an older
     (colour, marker) pair) are styled by :func:`compare.styles.label_styles` of ``records``.
@@ -416,7 +416,7 @@ def compute_section(records: Records, out, files: dict, styles: dict, save) -> l
     instances = instances_per_size(records)
     resolved = _resolve_styles(sorted({c.label for c in cells}), styles, records)
     fig, _ = plot_compute(cells, styles=resolved, instances=instances)
-    save(fig, out, "compute", files)
+    save(fig, "compute")
     return [
         "## Compute against network size",
         "",

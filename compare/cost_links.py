@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .figures import (OFF_SCALE, _y_limits, draw_boundary, shared_y, excess, excess_axis, finish_legend, legend_handles,
-                      links_axis, method_gid, panel_grid, panel_heading)
+                      links_axis, method_gid, panel_figure, panel_heading)
 from .records import as_records
 from .styles import Style
 
@@ -182,11 +182,7 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
     panels = sorted({p.panel for p in points})
     labels = sorted({p.label for p in points})
     styles = styles or {p.label: Style("#333333", "o", p.info_model) for p in points}
-    own = axes is None
-    if own:
-        fig, axes = panel_grid(panels)
-    else:
-        fig = next(iter(axes.values())).figure
+    fig, axes, own = panel_figure(panels, axes)
     per_node = len({p[1] for p in panels}) > 1
     designs = as_records(records).by_panel if records is not None else {}
 

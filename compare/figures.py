@@ -26,7 +26,7 @@ from .styles import BOUND_COLOUR, INFO_MODELS, INFO_ORDER, Style, label_styles  
 
 __all__ = ["LINESTYLES", "OFF_SCALE", "FLOOR", "excess", "excess_axis", "panel_grid", "panel_heading",
            "legend_handles", "finish_legend", "draw_boundary", "plot_budget_fronts", "label_styles", "method_gid",
-           "drawn_styles", "axis_floor"]
+           "drawn_styles", "axis_floor", "panel_figure"]
 
 #: Line style and description per information model (from :data:`compare.styles.INFO_MODELS`).
 LINESTYLES = {info: (style, text) for info, (style, _, text) in INFO_MODELS.items()}
@@ -136,6 +136,13 @@ def panel_grid(panels, *, width: float = 4.6, height: float = 3.9):
     return fig, dict(zip(panels, flat))
 
 
+def panel_figure(panels, axes=None):
+    """``(fig, axes, own)``: a new :func:`panel_grid` (own = True), or the figure of the panel -> Axes given."""
+    if axes is None:
+        return (*panel_grid(panels), True)
+    return next(iter(axes.values())).figure, axes, False
+
+
 def legend_handles(styles: dict, labels) -> list:
     """Legend entries grouped by information model: a heading per model, then its methods in its line style."""
     handles = []
@@ -219,11 +226,7 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
     panels = sorted({f.panel for f in fronts})
     labels = sorted({f.label for f in fronts})
     styles = styles or {f.label: Style("#333333", "o", f.info_model) for f in fronts}
-    own = axes is None
-    if own:
-        fig, axes = panel_grid(panels)
-    else:
-        fig = next(iter(axes.values())).figure
+    fig, axes, own = panel_figure(panels, axes)
     per_node = len({p[1] for p in panels}) > 1
 
     def shown_costs(group):

@@ -270,7 +270,7 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     if timed:
         from .compute_report import compute_section
 
-        lines += compute_section(timed, out, files, styles, lambda fig, out_, stem, files_: save(fig, stem))
+        lines += compute_section(timed, save, styles)
     lines += _provenance_lines(records, meta, commands, superseded, statuses, software)
     lines += ["## Files", ""]
     lines += [f"- `{p.name}`" for key, p in sorted(files.items()) if key.endswith((".png", ".svg"))]

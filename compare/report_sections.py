@@ -24,11 +24,11 @@ def sls_bounds(records) -> dict:
     No controller with the delayed information model beats it on its instance
     (partially nested information: the optimum is linear, and SLS finds it).
     """
+    from .findings import is_sls_bound
+
     per_panel = defaultdict(list)
     for r in as_records(records):
-        p = r.params
-        if (r.method in ("sls", "sls_topologies") and p.get("graph") == "complete" and p.get("act_delay") == 1
-                and p.get("speed") == 1.0 and p.get("fir") is None and r.status in OK_STATUSES):
+        if is_sls_bound(r) and r.status in OK_STATUSES:
             per_panel[r.instance.panel].append(r.cost)
     return {panel: (float(np.median(v)), len(v)) for panel, v in per_panel.items()}
 

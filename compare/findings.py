@@ -303,6 +303,12 @@ def _group_rank(group: str) -> tuple:
     return (3,)
 
 
+def _panel_order(panel: tuple) -> tuple:
+    """Panels by family, then N and ‖A‖₂ as numbers (instance keys are JSON text: "n": 100 sorts before 20)."""
+    family, n, a_norm = panel
+    return (family, n, -math.inf if a_norm is None else a_norm)
+
+
 def _tables(records: Records, labels: list[str], panels: dict, grid: np.ndarray) -> dict:
     grouped: dict[tuple, list] = {}
     for r, label in zip(records, labels):
@@ -343,7 +349,7 @@ def select_comparisons(records, *, budgets=DEFAULT_BUDGETS, pairs=()) -> list[Co
     plan = sorted(_plan(arms, tuple(budgets), pairs), key=lambda item: _group_rank(item[3]))
     out = []
     for a, b, pair_budgets, group in plan:
-        for panel in panels:
+        for panel in sorted(panels, key=_panel_order):
             if (panel, a) not in full or (panel, b) not in full:
                 continue
             for budget in pair_budgets:

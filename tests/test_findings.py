@@ -304,3 +304,14 @@ def test_forest_has_one_row_per_comparison_filled_where_significant(records, com
     tanh = [m for m in axes[0].lines if m.get_gid() == "forest-median" and m.get_marker() == styles[TANH].marker]
     assert tanh and all(to_hex(m.get_markeredgecolor()) == styles[TANH].colour.lower() for m in tanh)
     plt.close(fig)
+
+
+def test_panels_are_compared_in_numeric_order_of_n():
+    """Instance keys are JSON text, where "n": 100 sorts before "n": 20; the comparisons follow N as a number."""
+    rows = []
+    for n in (100, 20, 50):
+        for i in range(6):
+            rows += _designs(dict(_inst(i), n=n), i)
+    comparisons = select_comparisons(Records.from_rows(rows))
+    seen = list(dict.fromkeys(c.panel[1] for c in comparisons))
+    assert seen == [20, 50, 100]

@@ -40,6 +40,7 @@ import math
 import time
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Annotated, Literal
 
 import numpy as np
 
@@ -47,7 +48,7 @@ from codesign.controllers import register_controller
 from codesign.design import Design, count_links
 from codesign.instances import node_ranks, node_width
 from codesign.evaluation import simulate, simulate_to_precision, spectral_radius, validation_set
-from codesign.methods import method
+from codesign.methods import Above, AtLeast, AtMost, method
 from codesign._lazy import lazy_import
 from codesign.training import DTYPES, BatchedAdam, no_grad, torch_dtype
 
@@ -621,7 +622,7 @@ def _finish(job: _GJob, results, seconds) -> Design:
     rollout = simulate_to_precision(job.instance, controller)
     extras.update(rollout.summary())
     if not rollout.bounded:
-        return Design.failure("gcnn", job.params, "diverged", "validation rollout unbounded",
+        return Design.failure("gcnn", job.params, "diverged", rollout.divergence or "validation rollout unbounded",
                               info_model="instantaneous", seconds=seconds, links=links,
                               self_loops=self_loops, extras=extras)
     return Design(method="gcnn", params=job.params, controller=controller, cost=rollout.cost, links=links,
@@ -653,10 +654,13 @@ def _check(instance, seed, s):
 # The runner hands gcnn_batch up to 25 runs at once: they train in shared stacks.
 @method("gcnn", label="GCNN", batch=gcnn_batch, batch_size=25, produces=("training_curve",),
         node_blocks=True)
-def gcnn(instance, *, seed: int = 0, steps: int = 750, batch: int = 20, lr: float = 0.01, decay: float = 0.9,
-         decay_every: int = 10, weight_decay: float = 2.0, ensemble: int = 2, curve_every: int = 10,
-         curve_size: int = 100, dtype: str = "float64", stability_steps: int = 500,
-         stability_size: int = 100) -> Design:
+def gcnn(instance, *, seed: Annotated[int, AtLeast(0)] = 0, steps: Annotated[int, AtLeast(1)] = 750,
+         batch: Annotated[int, AtLeast(1)] = 20, lr: Annotated[float, Above(0)] = 0.01,
+         decay: Annotated[float, Above(0), AtMost(1)] = 0.9, decay_every: Annotated[int, AtLeast(1)] = 10,
+         weight_decay: Annotated[float, AtLeast(0)] = 2.0, ensemble: Annotated[int, AtLeast(1)] = 2,
+         curve_every: Annotated[int, AtLeast(0)] = 10, curve_size: Annotated[int, AtLeast(1)] = 100,
+         dtype: Literal["float64", "float32"] = "float64", stability_steps: Annotated[int, AtLeast(0)] = 500,
+         stability_size: Annotated[int, AtLeast(1)] = 100) -> Design:
     """Gama-Sojoudi GCNN (192 parameters, instantaneous multi-hop information), trained as the paper did.
 
     On node blocks the filter has p input channels and q outputs per node

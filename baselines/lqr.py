@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
 from codesign.controllers import StaticGain, ZeroInput
 from codesign.design import Design, count_links
 from codesign.evaluation import spectral_radius, static_gain_cost
+from codesign.instances import check_instance
 from codesign.methods import method
 
 from ._common import Timer
@@ -22,6 +25,7 @@ def lqr(instance) -> Design:
     It needs every state at every node with no delay: N(N-1) instantaneous links
     between the N nodes. Its normalized cost is 1 by construction of the terminal cost P.
     """
+    check_instance(instance, "lqr")
     with Timer() as timer:
         K = np.array(instance.K_lqr)
     links, self_loops = count_links(instance.node_support(K))
@@ -41,6 +45,7 @@ def lqr(instance) -> Design:
 @method("autonomous", label="Autonomous (u = 0)", node_blocks=True)
 def autonomous(instance) -> Design:
     """No control, ``u = 0``: the open-loop cost, with zero links."""
+    check_instance(instance, "autonomous")
     return Design(
         method="autonomous",
         params={},
@@ -54,7 +59,7 @@ def autonomous(instance) -> Design:
 
 
 @method("decentralized", label="Decentralized (diagonal K)", node_blocks=True)
-def decentralized(instance, *, start: str = "lqr_diagonal") -> Design:
+def decentralized(instance, *, start: Literal["lqr_diagonal", "zero"] = "lqr_diagonal") -> Design:
     """Best diagonal static gain ``u_i = k_i x_i`` for the benchmark cost (zero links).
 
     Minimizes the exact normalized finite-horizon cost over the diagonal of K
@@ -67,6 +72,7 @@ def decentralized(instance, *, start: str = "lqr_diagonal") -> Design:
     start : {"lqr_diagonal", "zero"}
         Where L-BFGS starts: the diagonal of the LQR gain, or zero.
     """
+    check_instance(instance, "decentralized")
     if start not in ("lqr_diagonal", "zero"):
         raise ValueError(f"start must be 'lqr_diagonal' or 'zero', got {start!r}")
     params = {"start": start}

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import re
+from typing import Annotated
 
 import numpy as np
 
@@ -34,7 +35,7 @@ from codesign.controllers import register_controller
 from codesign.design import INACCURATE_RTOL, Design, count_links, solver_status, vet_solver_cost
 from codesign.evaluation import impulse_responses, response_cost
 from codesign.instances import hop_distances
-from codesign.methods import method
+from codesign.methods import Above, AtLeast, Matches, NotEmpty, method
 
 from ._common import Timer
 from .qi import _check_speed, is_quadratically_invariant
@@ -57,6 +58,9 @@ _REALIZATION_RTOL = 1e-5
 # Normalized costs are >= 1; the autonomous system on this family is below 1e3.
 _ABSURD_OBJECTIVE = 1e8
 _GRAPH_NAME = re.compile(r"^(given|plant)(?:\^([1-9][0-9]*))?$")
+#: The graph names :func:`topology` knows, as a hyperparameter's bound (refused in a spec, before any run).
+GRAPH_NAME = Matches(r"complete|(given|plant)(\^[1-9][0-9]*)?",
+                     "a graph name: 'given', 'plant', 'given^k', 'plant^k' or 'complete'")
 
 
 # -- topologies and supports ---------------------------------------------------
@@ -262,12 +266,12 @@ def _realized_objective(instance, controller, T: int) -> float:
 def sls(
     instance,
     *,
-    graph: str = "plant",
+    graph: Annotated[str, GRAPH_NAME] = "plant",
     comm_adj=None,
-    speed: float = 1.0,
-    act_delay: int = 1,
-    horizon: int | None = None,
-    fir: int | None = None,
+    speed: Annotated[float, Above(0)] = 1.0,
+    act_delay: Annotated[int, AtLeast(0)] = 1,
+    horizon: Annotated[int, AtLeast(1)] | None = None,
+    fir: Annotated[int, AtLeast(1)] | None = None,
 ) -> Design:
     """SLS with communication-delay constraints on a graph (docs/methods.md).
 
@@ -402,11 +406,11 @@ def sls(
 def sls_topologies(
     instance,
     *,
-    graphs: list = list(TOPOLOGY_FAMILY),
-    speed: float = 1.0,
-    act_delay: int = 1,
-    horizon: int | None = None,
-    fir: int | None = None,
+    graphs: Annotated[list[Annotated[str, GRAPH_NAME]], NotEmpty()] = list(TOPOLOGY_FAMILY),
+    speed: Annotated[float, Above(0)] = 1.0,
+    act_delay: Annotated[int, AtLeast(0)] = 1,
+    horizon: Annotated[int, AtLeast(1)] | None = None,
+    fir: Annotated[int, AtLeast(1)] | None = None,
 ) -> list[Design]:
     """SLS on a family of communication graphs, one design per graph.
 

@@ -31,13 +31,13 @@ design reports.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import NamedTuple
+from typing import Annotated, NamedTuple
 
 import numpy as np
 
 from codesign.design import Design
 from codesign.evaluation import spectral_radius
-from codesign.methods import method
+from codesign.methods import Above, AtLeast, NotEmpty, method
 
 from ._common import Timer
 from ._sparse import DecentralizedCache, as_path_point, check_gammas, design_on_pattern, with_diagonal_end
@@ -181,14 +181,14 @@ def admm_gamma_max(instance) -> float:
 def sparse_admm(
     instance,
     *,
-    gammas: list | None = None,
-    reweight: int = 3,
-    rho: float = 100.0,
+    gammas: Annotated[list[Annotated[float, AtLeast(0)]], NotEmpty()] | None = None,
+    reweight: Annotated[int, AtLeast(1)] = 3,
+    rho: Annotated[float, Above(0)] = 100.0,
     polish: bool = True,
-    eps_weight: float = 1e-3,
-    tol: float = 1e-4,
-    kstep_tol: float = 1e-2,
-    maxiter: int = 1000,
+    eps_weight: Annotated[float, Above(0)] = 1e-3,
+    tol: Annotated[float, Above(0)] = 1e-4,
+    kstep_tol: Annotated[float, Above(0)] = 1e-2,
+    maxiter: Annotated[int, AtLeast(1)] = 1000,
     start: list | None = None,
     diagonal_end: bool = True,
 ):

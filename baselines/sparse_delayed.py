@@ -84,13 +84,14 @@ cut the path from 140 s to about 32 s (single thread, shared machine).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Annotated
 
 import numpy as np
 
 from codesign.controllers import register_controller
 from codesign.design import Design, count_links
 from codesign.evaluation import exact_cost, impulse_responses, spectral_radius
-from codesign.methods import method
+from codesign.methods import Above, AtLeast, NotEmpty, method
 
 from ._common import Timer
 from ._sparse import GRAD_RTOL, DecentralizedCache, check_gammas
@@ -808,13 +809,13 @@ def _diagonal_design(instance, params: dict, diagonal: Design, extras: dict) -> 
 def sparse_delayed(
     instance,
     *,
-    gammas: list | None = None,
-    reweight: int = 3,
-    eps_weight: float = 1e-3,
-    tol: float = 1e-7,
-    maxiter: int = 2000,
+    gammas: Annotated[list[Annotated[float, AtLeast(0)]], NotEmpty()] | None = None,
+    reweight: Annotated[int, AtLeast(1)] = 3,
+    eps_weight: Annotated[float, Above(0)] = 1e-3,
+    tol: Annotated[float, Above(0)] = 1e-7,
+    maxiter: Annotated[int, AtLeast(1)] = 2000,
     diagonal_end: bool = True,
-    seed: int = 0,
+    seed: Annotated[int, AtLeast(0)] = 0,
 ) -> list[Design]:
     """Sparse delayed static gains along a γ path by reweighted ℓ1, polished on their patterns.
 

@@ -72,11 +72,12 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import replace
+from typing import Annotated, Literal
 
 import numpy as np
 
 from codesign.design import Design, solver_status
-from codesign.methods import method
+from codesign.methods import Above, AtLeast, Below, NotEmpty, method
 
 from ._common import Timer
 from ._sparse import DecentralizedCache, check_gammas, design_on_pattern, with_diagonal_end
@@ -396,13 +397,13 @@ def _screened(params: dict, certified: tuple) -> Design:
 def sparse_sdp(
     instance,
     *,
-    gammas: list | None = None,
+    gammas: Annotated[list[Annotated[float, AtLeast(0)]], NotEmpty()] | None = None,
     polish: bool = True,
-    threshold: float = 1e-4,
-    solver: str = "auto",
-    eps: float = SCS_EPS,
-    max_iter: int | None = None,
-    max_states: int | None = None,
+    threshold: Annotated[float, AtLeast(0), Below(1)] = 1e-4,
+    solver: Literal["auto", "scs", "clarabel"] = "auto",
+    eps: Annotated[float, Above(0), Below(1)] = SCS_EPS,
+    max_iter: Annotated[int, AtLeast(1)] | None = None,
+    max_states: Annotated[int, AtLeast(1)] | None = None,
     diagonal_end: bool = True,
     screen: bool = True,
 ):

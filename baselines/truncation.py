@@ -9,11 +9,12 @@ cost.
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Annotated
 
 import numpy as np
 
 from codesign.design import Design
-from codesign.methods import method
+from codesign.methods import AtLeast, NotEmpty, method
 
 from ._common import Timer
 from ._sparse import DecentralizedCache, design_on_pattern
@@ -44,7 +45,8 @@ def truncation_mask(K, links: int, instance=None) -> np.ndarray:
 
 
 @method("truncated_lqr", label="Truncated LQR K", node_blocks=True)
-def truncated_lqr(instance, *, links: list | None = None, polish: bool = True) -> list[Design]:
+def truncated_lqr(instance, *, links: Annotated[list[Annotated[int, AtLeast(0)]], NotEmpty()] | None = None,
+                  polish: bool = True) -> list[Design]:
     """Sparse static gains by truncating the LQR gain to ``links`` off-diagonal entries, then polishing.
 
     Parameters

@@ -9,6 +9,10 @@ x0 ~ N(0, I) is known exactly:
   weighted by the likelihood ratio p/q, with the weights themselves and powers
   of a fitted cost form as further control variates.
 
+A third, :func:`projected_relative_stderr`, projects from a pilot sample the
+precision the first will reach on the validation draws: the decision to refine
+is taken on it, so that it does not depend on the estimate it lets through.
+
 A learned controller's cost is heavy-tailed when it saturates on large
 initial states along the plant's unstable directions: the variance left after
 the quadratic correction comes from the top percent of x0'Mx0, with M the
@@ -24,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["control_variate_estimate", "importance_estimate", "fitted_cost_form", "TiltedProposal", "CV_FOLDS",
-           "MIN_CV_DRAWS"]
+__all__ = ["control_variate_estimate", "importance_estimate", "fitted_cost_form", "projected_relative_stderr",
+           "TiltedProposal", "CV_FOLDS", "MIN_CV_DRAWS"]
 
 #: Folds of the cross-fitted control-variate regression.
 CV_FOLDS = 10
@@ -144,6 +148,58 @@ def control_variate_estimate(instance, x0, costs) -> tuple[float, float, str]:
     residuals, fit = _cross_fit(centered_rows, costs)
     estimator = f"control variates: {chosen.name}, {fit}"
     return float(residuals.mean()), float(residuals.std(ddof=1) / np.sqrt(m)), estimator
+
+
+def projected_relative_stderr(instance, x0, costs, draws: int, form=None, weights=None) -> float:
+    """Relative standard error that the estimate on ``draws`` validation draws is projected to have.
+
+    Projected from a pilot: ``costs`` of draws ``x0`` apart from the validation
+    set, i.i.d. N(0, I), or from a proposal whose likelihood ratios p/q are
+    ``weights`` (the projection is then for N(0, I) draws, as the validation set
+    is). The pilot's features are those :func:`control_variate_estimate` would
+    choose for the pilot's draw count, a subset of those it chooses for
+    ``draws``, so the projection errs high. When the validation estimate spans
+    every quadratic monomial, the few the pilot supports would overstate its
+    residual about tenfold for a learned controller; ``form`` (the quadratic
+    form of the controller's linearization, e.g. from
+    :func:`codesign.evaluation.local_cost_form`) then adds the feature
+    ``x0'Mx0`` (mean tr M), which lies in the validation estimate's span and
+    carries most of what the missing monomials would. Where the validation
+    estimate has fewer features, ``form`` is not used: the projection would
+    credit the validation estimate with a feature it lacks.
+
+    Returns
+    -------
+    float
+        ``s / sqrt(draws) / |mean|``, with ``s`` the standard deviation under
+        N(0, I) of the pilot's cross-fitted residuals (weighted least squares,
+        weighted moments), or of the costs themselves when ``draws`` is below
+        :data:`MIN_CV_DRAWS`, where the validation estimate is the sample mean;
+        ``inf`` when the mean is 0 and the spread is not.
+    """
+    costs = np.asarray(costs, dtype=float)
+    x0 = np.asarray(x0, dtype=float)
+    w = np.ones(costs.shape[0]) if weights is None else np.asarray(weights, dtype=float)
+    residuals = costs
+    if draws >= MIN_CV_DRAWS and costs.shape[0] >= MIN_CV_DRAWS:
+        chosen = _choose_features(instance, costs.shape[0])
+        means = chosen.means(instance)
+        spans_every_monomial = not _choose_features(instance, draws).with_P
+        extra = [np.asarray(form, dtype=float)] if form is not None and spans_every_monomial else []
+        root = np.sqrt(w)
+
+        def centered_rows(index):
+            columns = [np.ones((index.size, 1)), chosen.values(instance, x0[index]) - means]
+            columns += [(np.einsum("bi,ij,bj->b", x0[index], M, x0[index]) - np.trace(M))[:, None] for M in extra]
+            return root[index, None] * np.hstack(columns)  # weighted least squares
+
+        residuals = _cross_fit(centered_rows, root * costs)[0] / root
+    share = w / w.sum()
+    mean = share @ residuals
+    spread = np.sqrt(share @ (residuals - mean) ** 2)
+    if spread == 0:
+        return 0.0
+    return float(spread / np.sqrt(draws) / abs(mean)) if mean else float("inf")
 
 
 def fitted_cost_form(instance, x0, costs) -> np.ndarray:

@@ -16,9 +16,10 @@ variance is a small fraction of the plain one (about 50x smaller in standard
 error on paper instances). Coefficients are cross-fitted (each fold's residuals
 use coefficients fitted on the other folds), which keeps the estimator exactly
 unbiased; the plain sample mean is reported beside it. A cost too heavy-tailed
-for the target precision on the validation draws is refined on importance-sampled
-draws (:func:`simulate_to_precision`; the estimators are in
-:mod:`codesign.estimators`).
+for the target precision is refined on importance-sampled draws, a decision
+taken on pilot draws apart from the validation set so that it cannot select
+the validation estimates that happened to miss a rare costly state
+(:func:`simulate_to_precision`; the estimators are in :mod:`codesign.estimators`).
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .estimators import MIN_CV_DRAWS, TiltedProposal, control_variate_estimate, fitted_cost_form, importance_estimate
+from .estimators import (MIN_CV_DRAWS, TiltedProposal, control_variate_estimate, fitted_cost_form, importance_estimate,
+                         projected_relative_stderr)
 
 __all__ = [
     "static_gain_cost",
@@ -37,6 +39,8 @@ __all__ = [
     "simulate",
     "simulate_to_precision",
     "Rollout",
+    "PrecisionRecord",
+    "local_cost_form",
     "exact_cost",
     "compare_exact_and_simulated",
     "spectral_radius",
@@ -49,10 +53,18 @@ VALIDATION_SIZE = 2000
 PRECISION_TARGET = 1e-3
 #: The most draws :func:`simulate_to_precision` rolls out (64 x VALIDATION_SIZE).
 MAX_VALIDATION_SIZE = 128000
+#: Draws of the pilot that decides whether :func:`simulate_to_precision` refines (1/8 of VALIDATION_SIZE).
+PILOT_SIZE = 250
+#: A state beyond this magnitude makes a rollout unbounded (:func:`simulate`'s default ``bound``).
+ROLLOUT_BOUND = 1e8
 # Salt that separates validation draws from the instance generator's stream.
 _VALIDATION_SALT = 0x5EED
 # Salt of the importance-sampled draws that extend the validation set.
 _PROPOSAL_SALT = 0x715E
+# Salt of the pilot draws, a stream apart from both.
+_PILOT_SALT = 0x9170
+# Amplitude of the initial states whose responses give a controller's linearization (local_cost_form).
+_LOCAL_SCALE = 1e-4
 # Draws simulated at once while refining, and the most recent draws a proposal's cost form is fitted on.
 _ROLLOUT_CHUNK = 8000
 _REFIT_DRAWS = 16000
@@ -161,6 +173,31 @@ def validation_set(instance, size: int = VALIDATION_SIZE, *, seed: int | None = 
 
 
 @dataclass(frozen=True)
+class PrecisionRecord:
+    """How :func:`simulate_to_precision` made an estimate: what a design's extras must show to skip a rescore.
+
+    ``shared_draws`` validation draws (the first rows of the instance's
+    validation set, shared by every method) at relative standard error
+    ``target``, with at most ``max_draws`` draws in all; ``pilot_draws`` pilot
+    draws projected a relative standard error of ``pilot_rse`` on the shared
+    draws (no pilot, and NaN, when no refinement was possible).
+    """
+
+    shared_draws: int
+    target: float
+    max_draws: int
+    pilot_draws: int = 0
+    pilot_rse: float = float("nan")
+
+    def extras(self) -> dict:
+        record = {"shared_validation_draws": self.shared_draws, "precision_target": self.target,
+                  "max_draws": self.max_draws, "pilot_draws": self.pilot_draws}
+        if self.pilot_draws:
+            record["pilot_rse"] = self.pilot_rse
+        return record
+
+
+@dataclass(frozen=True)
 class Rollout:
     """Costs of a batched simulation.
 
@@ -172,8 +209,11 @@ class Rollout:
     normalized cost and ``weights`` its likelihood ratio when the last
     ``importance_draws`` of them were importance-sampled (None: all 1; see
     :func:`simulate_to_precision`). ``bounded`` is False when
-    a state or input became non-finite or exceeded ``bound``; ``max_state`` is
-    the largest ``|x_i(t)|`` seen.
+    a state or input became non-finite or exceeded ``bound`` on any draw the
+    estimate rests on (pilot and importance-sampled draws included), and then
+    ``cost`` is infinite and ``divergence`` says which draw; ``max_state`` is
+    the largest ``|x_i(t)|`` seen. ``precision`` records how
+    :func:`simulate_to_precision` made the estimate (None for :func:`simulate`).
     """
 
     cost: float
@@ -187,12 +227,26 @@ class Rollout:
     estimator: str = "sample mean"
     weights: np.ndarray | None = None
     importance_draws: int = 0
+    divergence: str = ""
+    precision: PrecisionRecord | None = None
 
     def summary(self) -> dict:
-        """What a design stores about this rollout (its extras)."""
-        return {"validation_size": int(self.costs.shape[0]), "importance_draws": self.importance_draws,
-                "cost_estimator": self.estimator, "plain_cost": self.plain_cost,
-                "plain_cost_stderr": self.plain_stderr}
+        """What a design stores about this rollout (its extras).
+
+        ``validation_size`` counts every draw of the estimate; with a
+        :class:`PrecisionRecord`, its fields too (``shared_validation_draws``,
+        ``precision_target``, ``max_draws``, ``pilot_draws``, ``pilot_rse``),
+        which tell :func:`codesign.scoring.evaluate` not to roll the design out
+        again; ``divergence`` when a draw left the bound.
+        """
+        summary = {"validation_size": int(self.costs.shape[0]), "importance_draws": self.importance_draws,
+                   "cost_estimator": self.estimator, "plain_cost": self.plain_cost,
+                   "plain_cost_stderr": self.plain_stderr}
+        if self.precision is not None:
+            summary.update(self.precision.extras())
+        if self.divergence:
+            summary["divergence"] = self.divergence
+        return summary
 
 
 def simulate(
@@ -203,7 +257,7 @@ def simulate(
     steps: int | None = None,
     noise_std: float = 0.0,
     seed: int = 0,
-    bound: float = 1e8,
+    bound: float = ROLLOUT_BOUND,
     control_variates: bool | None = None,
 ) -> Rollout:
     """Roll ``controller`` out from each row of ``x0`` and score the trajectories.
@@ -291,46 +345,142 @@ def _rollout_in_chunks(instance, controller, x, chunk: int = _ROLLOUT_CHUNK) -> 
     return Rollout(float("nan"), float("nan"), costs, bounded, max(part.max_state for part in parts), parts[0].steps)
 
 
+def local_cost_form(instance, controller, scale: float = _LOCAL_SCALE) -> np.ndarray | None:
+    """The quadratic form ``M`` of the controller's linearization: ``J(x0) / trace(P) ~ x0'M x0`` near 0.
+
+    The controller is rolled out from ``+scale e_j`` and ``-scale e_j`` and the
+    responses are differenced (so a constant offset in its input cancels), which
+    gives the closed-loop maps of :func:`impulse_responses` for any controller
+    that is smooth at the origin; exact for a linear one. None when a response
+    is not finite. Costs ``2 n`` rollout rows.
+    """
+    n = instance.n
+    x = np.vstack([scale * np.eye(n), -scale * np.eye(n)])
+    state = controller.reset(2 * n)
+    form = np.zeros((n, n))
+    with np.errstate(over="ignore", invalid="ignore"):
+        for _ in range(instance.horizon):
+            u, state = controller.step(state, x)
+            dx, du = (x[:n] - x[n:]) / (2 * scale), (u[:n] - u[n:]) / (2 * scale)
+            form += dx @ instance.Q @ dx.T + du @ instance.R @ du.T
+            x = x @ instance.A.T + u @ instance.B.T
+        dx = (x[:n] - x[n:]) / (2 * scale)
+        form += dx @ instance.P @ dx.T
+    if not np.all(np.isfinite(form)):
+        return None
+    return (form + form.T) / (2 * instance.trace_P)
+
+
+def _pilot(instance, controller, size: int) -> tuple[Rollout, float]:
+    """The pilot rollout and the relative standard error it projects for the estimate on ``size`` validation draws.
+
+    The pilot draws from a :class:`~codesign.estimators.TiltedProposal` along the
+    controller's :func:`local_cost_form` (N(0, I) when it has none), which is
+    known before any cost is drawn: it reaches a rare costly set along the
+    costly directions far more often than N(0, I) draws do (80 times as often
+    in the rare-set toy of ``tests/test_estimator_faults.py``), and the
+    likelihood ratios keep the projection one for N(0, I) draws.
+    """
+    form = local_cost_form(instance, controller)
+    if form is None:
+        x = np.random.default_rng([instance.seed, _PILOT_SALT]).standard_normal((PILOT_SIZE, instance.n))
+        weights = None
+    else:
+        proposal = TiltedProposal.along(form)
+        x = proposal.draw(instance, PILOT_SIZE, (_PILOT_SALT,))
+        weights = proposal.weights(x)
+    pilot = simulate(instance, controller, x, control_variates=False)
+    if not pilot.bounded:
+        return pilot, float("inf")
+    return pilot, projected_relative_stderr(instance, x, pilot.costs, size, form, weights)
+
+
+def _unbounded(rollout: Rollout, divergence: str, precision: PrecisionRecord, **fields) -> Rollout:
+    """``rollout`` marked unbounded, its cost infinite, because of the draw ``divergence`` describes."""
+    inf = float("inf")
+    return replace(rollout, cost=inf, stderr=inf, plain_cost=inf, plain_stderr=inf, bounded=False,
+                   divergence=divergence, precision=precision, **fields)
+
+
 def simulate_to_precision(instance, controller, size: int = VALIDATION_SIZE, *,
                           target: float = PRECISION_TARGET, max_size: int = MAX_VALIDATION_SIZE) -> Rollout:
-    """The control-variate estimate on the first ``size`` validation draws, refined until precise.
+    """The control-variate estimate on the first ``size`` validation draws, or a refinement where a pilot says so.
 
-    While the relative standard error exceeds ``target``, the cost is
-    re-estimated on batches of importance-sampled draws (each as large as all
-    draws so far, up to ``max_size`` draws in all). Each batch comes from a
+    **The decision.** :data:`PILOT_SIZE` pilot draws, from a stream of their
+    own and tilted along the controller's :func:`local_cost_form` (see
+    :func:`_pilot`), project the relative standard error that the estimate on
+    the ``size`` validation draws will have
+    (:func:`~codesign.estimators.projected_relative_stderr`). Within ``target``, the
+    validation estimate is reported as it is, even when it turns out less
+    precise: it is then unbiased, because whether it is reported does not
+    depend on its own draws. (Refining whenever the validation estimate missed
+    the target reported exactly the validation estimates that had missed a rare
+    costly state, and biased the result low.) The pilot's draws are in no
+    estimate.
+
+    **The refinement.** Otherwise the cost is re-estimated on batches of
+    importance-sampled draws (each as large as all draws so far, up to
+    ``max_size`` draws in all) until the pooled relative standard error is
+    within ``target``. Each batch comes from a
     :class:`~codesign.estimators.TiltedProposal` along the quadratic form fitted
-    to the costs of the draws before it (at most the latest ``_REFIT_DRAWS``) and
-    is scored by :func:`~codesign.estimators.importance_estimate`; its estimate
-    is unbiased, since its proposal is fixed before its draws are made. The
-    reported cost pools the batches by draw count (:func:`_pooled`); the
-    validation draws only shape the first proposal, because their estimate is
-    the one found too imprecise, and its error is least reliable exactly when a
-    rare costly state was missed. A well-behaved controller stops at the
-    ``size`` draws every method shares and costs no extra rollout. A
-    heavy-tailed cost may stop at ``max_size`` above the target; its standard
-    error says so. If a proposed draw leaves the rollout's bound, the estimate
-    stops at the batches before it and ``estimator`` says so.
+    to the costs of the draws before it (at most the latest ``_REFIT_DRAWS``)
+    and is scored by :func:`~codesign.estimators.importance_estimate`; its
+    estimate is unbiased, since its proposal is fixed before its draws are
+    made. The reported cost pools the batches by draw count (:func:`_pooled`);
+    the validation draws only shape the first proposal. Stopping once the
+    pooled error meets the target can still favour batches that missed a rare
+    set; the proposal reaches such a set far more often than N(0, I) does (see
+    docs/evaluation.md for the measured size). A heavy-tailed cost may stop at
+    ``max_size`` above the target; its standard error says so.
+
+    **Divergence.** A pilot or importance-sampled draw that leaves the
+    rollout's bound (:data:`ROLLOUT_BOUND`) makes the result unbounded, like a
+    validation draw: ``bounded`` False, ``cost`` infinite, ``divergence`` naming
+    the draw. It is never dropped.
+
     ``Rollout.costs`` holds every draw's cost and ``Rollout.weights`` its
-    likelihood ratio (1 for validation draws).
+    likelihood ratio (1 for validation draws); ``Rollout.precision`` records
+    ``size``, ``target``, ``max_size`` and the pilot.
     """
     if max_size < size:
         raise ValueError(f"max_size must be at least size ({size}), got {max_size}")
     x0 = validation_set(instance, size)
     first = simulate(instance, controller, x0, control_variates=True)
-    rollout = first
+    record = PrecisionRecord(int(size), float(target), int(max_size))
+    if not first.bounded or max_size == size:
+        return replace(first, precision=record)
+    pilot, projected = _pilot(instance, controller, size)
+    record = replace(record, pilot_draws=PILOT_SIZE, pilot_rse=projected)
+    if not pilot.bounded:
+        return _unbounded(first, f"a pilot draw (one of {PILOT_SIZE} drawn apart from the validation set) left the "
+                                 f"rollout's bound {ROLLOUT_BOUND:g}: the cost is treated as infinite", record,
+                          max_state=max(first.max_state, pilot.max_state))
+    if projected <= target:
+        return replace(first, precision=record)
+    return _refine(instance, controller, first, x0, record)
+
+
+def _refine(instance, controller, first: Rollout, x0, record: PrecisionRecord) -> Rollout:
+    """Importance-sampled batches after ``first``'s validation draws ``x0``, pooled (:func:`simulate_to_precision`)."""
+    size, target, max_size = record.shared_draws, record.target, record.max_draws
     draws, costs, weights = [x0], [first.costs], [np.ones(size)]
     estimates, plains = [], []
-    total, batch = size, 0
-    while (rollout.bounded and np.isfinite(rollout.cost) and total < max_size
-           and rollout.stderr > target * abs(rollout.cost)):
+    rollout, total, batch = first, size, 0
+    why = (f"refined because a {record.pilot_draws}-draw pilot projected a relative standard error of "
+           f"{record.pilot_rse:.2%} there")
+    while total < max_size and (batch == 0 or rollout.stderr > target * abs(rollout.cost)):
         count = min(total, max_size - total)
         recent_x, recent_costs = np.vstack(draws)[-_REFIT_DRAWS:], np.concatenate(costs)[-_REFIT_DRAWS:]
         proposal = TiltedProposal.along(fitted_cost_form(instance, recent_x, recent_costs))
         x = proposal.draw(instance, count, (_PROPOSAL_SALT, batch))
         more = _rollout_in_chunks(instance, controller, x)
         if not more.bounded:
-            note = f"; stopped: a proposed draw beyond the first {total} left the bound"
-            return replace(rollout, estimator=rollout.estimator + note)
+            return _unbounded(
+                rollout, f"an importance-sampled draw of refinement batch {batch + 1} (draws {total + 1}-"
+                         f"{total + count}, {proposal.describe()}) left the rollout's bound {ROLLOUT_BOUND:g}: "
+                         f"the cost is treated as infinite", record,
+                costs=np.concatenate(costs + [more.costs]), weights=np.concatenate(weights + [proposal.weights(x)]),
+                importance_draws=total + count - size, max_state=max(rollout.max_state, more.max_state))
         cost, stderr, mean, mean_stderr, described = importance_estimate(instance, x, more.costs, proposal)
         estimates.append((count, cost, stderr))
         plains.append((count, mean, mean_stderr))
@@ -342,8 +492,8 @@ def simulate_to_precision(instance, controller, size: int = VALIDATION_SIZE, *,
                           max(rollout.max_state, more.max_state), first.steps, *_pooled(plains),
                           f"{described}, on {total - size} draws in {batch} batch{'es' if batch > 1 else ''} "
                           f"(each proposal fitted to the draws before it, pooled by draw count), after "
-                          f"{first.estimator} on the {size} validation draws",
-                          np.concatenate(weights), total - size)
+                          f"{first.estimator} on the {size} validation draws ({why})",
+                          np.concatenate(weights), total - size, precision=record)
     return rollout
 
 

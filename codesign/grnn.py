@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 
@@ -25,7 +25,7 @@ from .design import Design, count_links
 from .instances import node_ranks, node_width
 from .evaluation import (exact_cost, impulse_responses, simulate, simulate_to_precision, spectral_radius,
                          validation_set)
-from .methods import method
+from .methods import Above, AtLeast, method
 from ._lazy import lazy_import
 from .training import ACTIVATIONS, DTYPES, ModelSpec, _tanh_, init_fwg, resolve_engine, train_stack
 
@@ -495,7 +495,7 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
         extras["stability_steps"] = steps
     if not rollout.bounded or not np.isfinite(rollout.cost):
         return Design.failure(method, job.params, "diverged",
-                              "the trained controller's validation rollout is unbounded",
+                              rollout.divergence or "the trained controller's validation rollout is unbounded",
                               info_model="delayed", seconds=seconds, links=links, self_loops=self_loops,
                               extras=extras)
     message = ""
@@ -534,12 +534,16 @@ def _finish_linear(job: _Job, controller, first, links, self_loops, seconds, ext
                   seconds=seconds, cost_stderr=0.0, cost_kind="exact", extras=extras)
 
 
-def grnn(instance, *, variant: str = "given", beta: float | None = None, seed: int = 0,
-         steps: int = 750, batch: int = 20, hidden: int = 5, lr: float = 0.02, l1_lr: float = 0.03,
-         clip: float = 10.0, frob: float = 2.0, ensemble: int = 2, refine_ensemble: int = 1,
-         threshold: float = 4e-3, curve_every: int = 10, curve_size: int = 100,
-         dtype: Literal["float64", "float32"] = "float64", stability_steps: int = 500,
-         stability_size: int = 100, activation: Literal["tanh", "identity"] = "tanh",
+def grnn(instance, *, variant: str = "given", beta: Annotated[float, AtLeast(0)] | None = None,
+         seed: Annotated[int, AtLeast(0)] = 0, steps: Annotated[int, AtLeast(1)] = 750,
+         batch: Annotated[int, AtLeast(1)] = 20, hidden: Annotated[int, AtLeast(1)] = 5,
+         lr: Annotated[float, Above(0)] = 0.02, l1_lr: Annotated[float, Above(0)] = 0.03,
+         clip: Annotated[float, AtLeast(0)] = 10.0, frob: Annotated[float, AtLeast(0)] = 2.0,
+         ensemble: Annotated[int, AtLeast(1)] = 2, refine_ensemble: Annotated[int, AtLeast(1)] = 1,
+         threshold: Annotated[float, AtLeast(0)] = 4e-3, curve_every: Annotated[int, AtLeast(0)] = 10,
+         curve_size: Annotated[int, AtLeast(2)] = 100, dtype: Literal["float64", "float32"] = "float64",
+         stability_steps: Annotated[int, AtLeast(0)] = 500, stability_size: Annotated[int, AtLeast(1)] = 100,
+         activation: Literal["tanh", "identity"] = "tanh",
          engine: Literal["torch", "fused", "auto"] = "torch") -> Design:
     """Train a GRNN distributed controller on ``instance`` (paper Sec. III).
 

@@ -17,17 +17,36 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Instance", "InstanceError", "paper_instance", "hop_distances", "node_ranks", "node_width"]
+__all__ = ["Instance", "InstanceError", "check_instance", "paper_instance", "hop_distances", "node_ranks",
+           "node_width"]
 
 
 class InstanceError(ValueError):
     """Raised for malformed problem data (shapes, NaN, costs, stabilizability)."""
 
 
-def _frozen(array: np.ndarray) -> np.ndarray:
+def _frozen(label: str, array: np.ndarray) -> np.ndarray:
+    if np.iscomplexobj(array):
+        raise InstanceError(f"{label} is complex; an instance holds real matrices")
     array = np.array(array, dtype=float, copy=True)
+    if not np.all(np.isfinite(array)):
+        raise InstanceError(f"{label} has non-finite entries (NaN or inf)")
     array.setflags(write=False)
     return array
+
+
+def check_instance(value, where: str = "") -> None:
+    """Raise TypeError, prefixed by ``where``, when ``value`` is not an :class:`Instance`.
+
+    Methods read the instance's attributes at once; without this a ``None`` or an
+    array gives an AttributeError from deep inside the method.
+    """
+    if not isinstance(value, Instance):
+        prefix = f"{where}: " if where else ""
+        shown = repr(value)
+        shown = shown if len(shown) <= 60 else shown[:57] + "..."
+        raise TypeError(f"{prefix}expected a codesign.Instance (Instance.from_matrices, paper_instance or a "
+                        f"family's instance), got {type(value).__name__} {shown}")
 
 
 def hop_distances(adj: np.ndarray) -> np.ndarray:
@@ -51,6 +70,10 @@ def hop_distances(adj: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class Instance:
     """One linear-quadratic distributed control problem.
+
+    ``n`` is the number of states and ``m`` the number of inputs; the N nodes
+    (:attr:`nodes`) each hold one or more states, so n = N only when each node
+    has one state, as in the paper's family.
 
     Attributes
     ----------
@@ -140,10 +163,14 @@ class Instance:
         n = A.shape[0]
         if A.shape != (n, n):
             raise InstanceError(f"A must be square, got shape {A.shape}")
+        if n == 0:
+            raise InstanceError("A is empty (shape (0, 0)): an instance needs at least one state")
         B = _as_matrix("B", B)
         if B.shape[0] != n:
             raise InstanceError(f"B must have {n} rows to match A, got shape {B.shape}")
         m = B.shape[1]
+        if m == 0:
+            raise InstanceError(f"B has no columns (shape {B.shape}): an instance needs at least one input")
         state_nodes, input_nodes = _node_maps(n, m, state_nodes, input_nodes)
         nodes = int(state_nodes.max()) + 1
         Q = np.eye(n) if Q is None else _as_matrix("Q", Q)
@@ -187,7 +214,7 @@ class Instance:
 
     def __post_init__(self):
         for name in ("A", "B", "Q", "R", "P", "comm_adj", "plant_adj"):
-            object.__setattr__(self, name, _frozen(getattr(self, name)))
+            object.__setattr__(self, name, _frozen(name, getattr(self, name)))
         object.__setattr__(self, "spec", dict(self.spec))
         for name, size in (("state_nodes", self.A.shape[0]), ("input_nodes", self.B.shape[1])):
             value = getattr(self, name)
@@ -198,7 +225,7 @@ class Instance:
     # -- derived quantities -------------------------------------------------
     @property
     def n(self) -> int:
-        """Number of states (equal to the number of nodes when each node has one state)."""
+        """Number of states n, not of nodes (:attr:`nodes`); the two are equal only when each node has one state."""
         return self.A.shape[0]
 
     @property
@@ -332,7 +359,13 @@ def _node_coupling(support: np.ndarray, row_nodes, col_nodes, nodes: int) -> np.
 
 def _as_matrix(label: str, value) -> np.ndarray:
     try:
-        M = np.array(value, dtype=float)
+        raw = np.asarray(value)
+        # A cast to float would drop an imaginary part with only a warning.
+        if np.iscomplexobj(raw):
+            raise InstanceError(f"{label} is complex; give a real matrix (its .real if the imaginary parts are zero)")
+        M = np.array(raw, dtype=float)
+    except InstanceError:
+        raise
     except (TypeError, ValueError) as exc:
         raise InstanceError(f"{label} must be a numeric matrix: {exc}") from None
     if M.ndim != 2:

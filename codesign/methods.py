@@ -14,25 +14,48 @@ one table of settings). The :func:`method` decorator wraps it in a frozen
         return score(instance, StaticGain(K))
 
 The decorated function is returned unchanged, so it stays an ordinary function
-for notebooks. Calling the :class:`Method` checks the hyperparameters, runs the
-function and stamps the method's name into every returned :class:`Design`
-(a method never types its own name). This follows benchopt's one-file solvers and
-pymanopt's split between an optimizer and its frozen result.
+for notebooks. Calling the :class:`Method` checks the instance and the
+hyperparameters, runs the function and stamps the method's name into every returned
+:class:`Design` (a method never types its own name). This follows benchopt's one-file
+solvers and pymanopt's split between an optimizer and its frozen result.
+
+A hyperparameter's bounds are declared in its annotation, with ``typing.Annotated``
+(plain Python calls and type checkers still see the plain type), so that a spec is
+refused before any work::
+
+    def f(instance, *, steps: Annotated[int, AtLeast(1)] = 750,
+          beta: Annotated[float, AtLeast(0)] | None = None,
+          gammas: list[Annotated[float, Above(0)]] | None = None,
+          dtype: Literal["float64", "float32"] = "float64"): ...
+
+The constraints are :class:`AtLeast`, :class:`Above`, :class:`AtMost`,
+:class:`Below` (numbers; each also refuses NaN and infinities), :class:`NotEmpty`
+(lists) and :class:`Matches` (strings of a pattern); a ``Literal`` gives the
+choices.
 """
 
 from __future__ import annotations
 
 import inspect
+import math
+import re
 import types
 import typing
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 from .design import Design
+from .instances import check_instance
 
 __all__ = [
     "Method",
     "Hyperparameter",
+    "AtLeast",
+    "Above",
+    "AtMost",
+    "Below",
+    "NotEmpty",
+    "Matches",
     "method",
     "register",
     "get_method",
@@ -54,9 +77,96 @@ class UnknownMethodError(KeyError):
         return str(self.args[0])
 
 
+# -- value constraints, carried in a hyperparameter's Annotated annotation -------------
+def _finite(value) -> bool:
+    # An int too large for a float is still a finite number.
+    return isinstance(value, int) or math.isfinite(value)
+
+
+@dataclass(frozen=True)
+class AtLeast:
+    """A number ``>= bound`` (and finite)."""
+
+    bound: float
+
+    def allows(self, value) -> bool:
+        return _finite(value) and value >= self.bound
+
+    def __str__(self) -> str:
+        return f">= {self.bound:g}"
+
+
+@dataclass(frozen=True)
+class Above:
+    """A number ``> bound`` (and finite)."""
+
+    bound: float
+
+    def allows(self, value) -> bool:
+        return _finite(value) and value > self.bound
+
+    def __str__(self) -> str:
+        return f"> {self.bound:g}"
+
+
+@dataclass(frozen=True)
+class AtMost:
+    """A number ``<= bound`` (and finite)."""
+
+    bound: float
+
+    def allows(self, value) -> bool:
+        return _finite(value) and value <= self.bound
+
+    def __str__(self) -> str:
+        return f"<= {self.bound:g}"
+
+
+@dataclass(frozen=True)
+class Below:
+    """A number ``< bound`` (and finite)."""
+
+    bound: float
+
+    def allows(self, value) -> bool:
+        return _finite(value) and value < self.bound
+
+    def __str__(self) -> str:
+        return f"< {self.bound:g}"
+
+
+@dataclass(frozen=True)
+class NotEmpty:
+    """A list with at least one item."""
+
+    def allows(self, value) -> bool:
+        return len(value) > 0
+
+    def __str__(self) -> str:
+        return "non-empty"
+
+
+@dataclass(frozen=True)
+class Matches:
+    """A string that matches ``pattern`` in full; ``text`` says which strings those are, for messages."""
+
+    pattern: str
+    text: str
+
+    def allows(self, value) -> bool:
+        return re.fullmatch(self.pattern, value) is not None
+
+    def __str__(self) -> str:
+        return self.text
+
+
+_LOWER = (AtLeast, Above)
+_UPPER = (AtMost, Below)
+
+
 @dataclass(frozen=True)
 class Hyperparameter:
-    """One keyword-only hyperparameter: its name, default, annotation and one-line meaning."""
+    """One keyword-only hyperparameter: its name, default, annotation (bounds included) and one-line meaning."""
 
     name: str
     default: Any
@@ -68,9 +178,11 @@ class Hyperparameter:
         return _type_name(self.annotation)
 
     def check(self, value, where: str) -> None:
-        """Raise ValueError naming ``where`` when ``value`` does not fit the annotation."""
-        if not _fits(value, self.annotation):
-            raise ValueError(f"{where}: expected {self.type_name}, got {type(value).__name__} {value!r}")
+        """Raise ValueError naming ``where`` when ``value`` does not fit the annotation's type or bounds."""
+        problem = _problem(value, self.annotation)
+        if problem is not None:
+            suffix, message = problem
+            raise ValueError(f"{where}{suffix}: {message}")
 
 
 @dataclass(frozen=True)
@@ -173,7 +285,7 @@ class Method:
         )
 
     def check_params(self, params: dict, where: str = "params") -> None:
-        """Raise ValueError naming the key for an unknown or mistyped hyperparameter."""
+        """Raise ValueError naming the key for an unknown hyperparameter, or one of the wrong type or out of bounds."""
         accepted = self.hyperparameters
         for key, value in params.items():
             if key not in accepted:
@@ -183,6 +295,10 @@ class Method:
 
     def _stamp(self, result, params: dict) -> list[Design]:
         designs = list(result) if isinstance(result, (list, tuple)) else [result]
+        if not designs:
+            # A run without a design would be stored with no status at all.
+            raise RuntimeError(f"method {self.name!r} returned no design (an empty list); "
+                               "a method returns a Design or a non-empty list of them")
         for d in designs:
             if not isinstance(d, Design):
                 raise TypeError(f"method {self.name!r} returned {type(d).__name__}, not a Design (or a list of them)")
@@ -199,6 +315,7 @@ class Method:
 
     def __call__(self, instance, **params) -> list[Design]:
         """Designs for one instance (always a list), with the name stamped in."""
+        check_instance(instance, f"method {self.name!r}")
         self.check_params(params)
         refused = self.unsupported(instance, params)
         if refused is not None:
@@ -208,6 +325,8 @@ class Method:
     def run_batch(self, pairs) -> list[list[Design]]:
         """Designs for many (instance, params) pairs: one batched call if the method has one."""
         pairs = list(pairs)
+        for instance, _ in pairs:
+            check_instance(instance, f"method {self.name!r}")
         if self.batch is None or any(self.unsupported(instance, params) for instance, params in pairs):
             return [self(instance, **params) for instance, params in pairs]
         for _, params in pairs:
@@ -242,7 +361,7 @@ def _hyperparameters(func: Callable, name: str, dropped: set) -> dict:
             f"then keyword-only hyperparameters (def f(instance, *, ...)); got {name}{sig}"
         )
     try:
-        hints = typing.get_type_hints(func)
+        hints = typing.get_type_hints(func, include_extras=True)  # keep Annotated bounds
     except Exception:  # an annotation that does not resolve is treated as unchecked
         hints = {}
     docs = _param_docs(inspect.getdoc(func) or "")
@@ -274,7 +393,17 @@ def _kind_of(default):
     return Any
 
 
+def _unwrap(hint) -> tuple[Any, tuple]:
+    """``Annotated[T, *constraints]`` as ``(T, constraints)``; any other hint as ``(hint, ())``."""
+    if typing.get_origin(hint) is typing.Annotated:
+        inner, *metadata = typing.get_args(hint)
+        return inner, tuple(c for c in metadata if hasattr(c, "allows"))
+    return hint, ()
+
+
 def _fits(value, hint) -> bool:
+    """Whether ``value`` has the type ``hint`` names (bounds are :func:`_problem`'s)."""
+    hint, _ = _unwrap(hint)
     if hint is Any or hint is inspect.Parameter.empty:
         return True
     origin = typing.get_origin(hint)
@@ -302,7 +431,55 @@ def _fits(value, hint) -> bool:
     return True
 
 
+def _problem(value, hint) -> tuple[str, str] | None:
+    """Why ``value`` does not fit ``hint``: (key suffix such as ``"[0]"``, message), or None when it fits."""
+    if not _fits(value, hint):
+        return "", f"expected {_type_name(hint)}, got {type(value).__name__} {value!r}"
+    hint, constraints = _unwrap(hint)
+    origin = typing.get_origin(hint)
+    if origin in (typing.Union, types.UnionType):
+        # Of the members whose type fits, report the first one's bound.
+        problems = [_problem(value, arg) for arg in typing.get_args(hint) if _fits(value, arg)]
+        return None if None in problems else problems[0]
+    if origin in (list, tuple) and typing.get_args(hint):
+        for i, item in enumerate(value):
+            problem = _problem(item, typing.get_args(hint)[0])
+            if problem is not None:
+                return f"[{i}]{problem[0]}", problem[1]
+    if all(c.allows(value) for c in constraints):
+        return None
+    return "", f"must be {_requirement(hint, constraints)}, got {value!r}"
+
+
+#: What a value of a constrained type is called in "must be ..." messages.
+_NOUNS = {int: "an integer", float: "a finite number", str: "a string", list: "a list"}
+
+
+def _requirement(hint, constraints) -> str:
+    """``an integer >= 1``, ``a finite number in (0, 1]``, ``a non-empty list``, or a :class:`Matches` text."""
+    for c in constraints:
+        if isinstance(c, Matches):
+            return c.text
+    if any(isinstance(c, NotEmpty) for c in constraints):
+        return "a non-empty list"
+    noun = _NOUNS.get(typing.get_origin(hint) or hint, _type_name(hint))
+    bounds = _bounds_text(constraints)
+    return f"{noun} {bounds}" if bounds else noun
+
+
+def _bounds_text(constraints) -> str:
+    """``>= 1``, ``> 0``, or an interval ``in [0, 1)`` when a lower and an upper bound are both given."""
+    lower = [c for c in constraints if isinstance(c, _LOWER)]
+    upper = [c for c in constraints if isinstance(c, _UPPER)]
+    if len(lower) == len(upper) == 1:
+        low, high = lower[0], upper[0]
+        return (f"in {'[' if isinstance(low, AtLeast) else '('}{low.bound:g}, "
+                f"{high.bound:g}{']' if isinstance(high, AtMost) else ')'}")
+    return " and ".join(str(c) for c in lower + upper)
+
+
 def _type_name(hint) -> str:
+    hint, constraints = _unwrap(hint)
     if hint is Any or hint is inspect.Parameter.empty:
         return "any"
     if hint is None or hint is type(None):
@@ -312,10 +489,16 @@ def _type_name(hint) -> str:
         return " or ".join(_type_name(a) for a in typing.get_args(hint))
     if origin is typing.Literal:
         return " or ".join(repr(a) for a in typing.get_args(hint))
-    if origin in (list, tuple):
+    if origin in (list, tuple) or hint in (list, tuple):
         args = typing.get_args(hint)
-        return f"list of {_type_name(args[0])}" if args else "list"
-    return getattr(hint, "__name__", str(hint))
+        name = f"list of {_type_name(args[0])}" if args else "list"
+        return f"non-empty {name}" if any(isinstance(c, NotEmpty) for c in constraints) else name
+    name = getattr(hint, "__name__", str(hint))
+    matches = [c.text for c in constraints if isinstance(c, Matches)]
+    if matches:
+        return f"{name} ({matches[0]})"
+    bounds = _bounds_text(constraints)
+    return f"{name} {bounds}" if bounds else name
 
 
 def _param_docs(doc: str) -> dict:

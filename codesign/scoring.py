@@ -14,7 +14,8 @@ from dataclasses import replace
 import numpy as np
 
 from .design import INFO_MODELS, Design, count_links
-from .evaluation import MAX_VALIDATION_SIZE, VALIDATION_SIZE, exact_cost, simulate, simulate_to_precision, validation_set
+from .evaluation import (MAX_VALIDATION_SIZE, PRECISION_TARGET, VALIDATION_SIZE, exact_cost, simulate,
+                         simulate_to_precision, validation_set)
 
 __all__ = ["score", "evaluate"]
 
@@ -71,9 +72,11 @@ def score(
     -------
     Design
         Exact cost (``cost_kind="exact"``) for linear controllers, else the
-        validation-set control-variate estimate with its standard error
-        (``"simulated"``; see :func:`codesign.evaluation.control_variate_estimate`); status
-        ``"diverged"`` when the rollout is unbounded.
+        simulated estimate of :func:`evaluate` with its standard error
+        (``"simulated"``: the validation-set control-variate estimate, refined
+        where a pilot says so); status ``"diverged"`` when a draw of either
+        leaves the bound. A simulated cost is always computed here, whatever
+        ``extras`` hold.
     """
     support = _support(instance, controller)
     if support is not None:
@@ -95,41 +98,61 @@ def score(
             return replace(design, status="diverged", cost=float("nan"), cost_stderr=float("nan"),
                            message=message or "the exact cost is not finite")
         return replace(design, cost=exact, cost_stderr=0.0, cost_kind="exact")
-    return evaluate(instance, replace(design, cost_kind="simulated"), validation_size=validation_size)
+    return _simulated(instance, replace(design, cost_kind="simulated"), validation_size)
+
+
+def _simulated(instance, design: Design, validation_size: int) -> Design:
+    """``design`` with the cost :func:`~codesign.evaluation.simulate_to_precision` gives it, or ``diverged``."""
+    rollout = simulate_to_precision(instance, design.controller, validation_size,
+                                    max_size=max(validation_size, MAX_VALIDATION_SIZE))
+    extras = dict(design.extras, **rollout.summary())
+    if not rollout.bounded or not np.isfinite(rollout.cost):
+        message = rollout.divergence or f"the controller's {validation_size}-draw validation rollout is unbounded"
+        return Design.failure(design.method, design.params, "diverged", message, info_model=design.info_model,
+                              seconds=design.seconds, links=design.links, self_loops=design.self_loops,
+                              extras=extras)
+    return replace(design, cost=rollout.cost, cost_stderr=rollout.stderr, extras=extras)
+
+
+def _scored_to_precision(extras: dict, validation_size: int) -> bool:
+    """Whether :func:`~codesign.evaluation.simulate_to_precision` made the design's cost as the harness would.
+
+    Read from the structured record its rollout summary leaves in the extras
+    (:class:`~codesign.evaluation.PrecisionRecord`): at least ``validation_size``
+    shared validation draws, a precision target no looser than
+    :data:`~codesign.evaluation.PRECISION_TARGET` and no fewer draws allowed.
+    Such a design is never rolled out again (the GRNN and GCNN score their own
+    designs this way, refined ones included).
+    """
+    target = extras.get("precision_target")
+    return (target is not None and target <= PRECISION_TARGET
+            and extras.get("shared_validation_draws", 0) >= validation_size
+            and extras.get("max_draws", 0) >= max(validation_size, MAX_VALIDATION_SIZE))
 
 
 def evaluate(instance, design: Design, *, validation_size: int = VALIDATION_SIZE, noise_std: float = 0.0) -> Design:
     """Score a method's design the way the harness does.
 
-    A simulated cost is recomputed on the instance's first ``validation_size``
-    validation draws (the same draws for every method), refined on
-    importance-sampled draws while its relative standard error exceeds 0.1 %
-    (:func:`codesign.evaluation.simulate_to_precision`), and the design becomes
-    ``diverged`` if that rollout is unbounded; exact costs are kept. The cost is
-    the control-variate estimate and the extras keep the plain sample mean
-    (``plain_cost``, ``plain_cost_stderr``), the draws and the estimator. With
-    ``noise_std > 0`` the design also gets a process-noise robustness score in its
-    extras (``noise_cost``, ``noise_cost_stderr``): exact for linear controllers,
-    simulated otherwise.
+    A simulated cost is made by :func:`codesign.evaluation.simulate_to_precision`
+    on the instance's first ``validation_size`` validation draws (the same draws
+    for every method), refined on importance-sampled draws where a pilot
+    projects a relative standard error above 0.1 %; a design whose extras show
+    it was already scored that way on at least these draws keeps its cost and
+    is not rolled out again. The design becomes ``diverged`` if any draw of that
+    estimate (validation, pilot or importance-sampled) leaves the rollout's
+    bound, with a message naming the draw; exact costs are kept. The cost is the
+    control-variate estimate and the extras keep the plain sample mean
+    (``plain_cost``, ``plain_cost_stderr``), the draws, the estimator and the
+    precision record. With ``noise_std > 0`` the design also gets a
+    process-noise robustness score in its extras (``noise_cost``,
+    ``noise_cost_stderr``): exact for linear controllers, simulated otherwise.
     """
     if design.controller is None or design.status not in ("optimal", "inaccurate"):
         return design
-    if design.cost_kind == "simulated":
-        # A method that already scored on at least these validation draws with control
-        # variates (the GRNN and GCNN do, refined until precise) used them: no second rollout.
-        shared = design.extras.get("validation_size", 0) - design.extras.get("importance_draws", 0)
-        done = (shared >= validation_size
-                and str(design.extras.get("cost_estimator", "")).startswith("control variates"))
-        if not done:
-            rollout = simulate_to_precision(instance, design.controller, validation_size,
-                                            max_size=max(validation_size, MAX_VALIDATION_SIZE))
-            extras = dict(design.extras, **rollout.summary())
-            if not rollout.bounded or not np.isfinite(rollout.cost):
-                return Design.failure(design.method, design.params, "diverged",
-                                      f"the controller's {validation_size}-draw validation rollout is unbounded",
-                                      info_model=design.info_model, seconds=design.seconds, links=design.links,
-                                      self_loops=design.self_loops, extras=extras)
-            design = replace(design, cost=rollout.cost, cost_stderr=rollout.stderr, extras=extras)
+    if design.cost_kind == "simulated" and not _scored_to_precision(design.extras, validation_size):
+        design = _simulated(instance, design, validation_size)
+        if design.status == "diverged":
+            return design
     if noise_std > 0:
         cost = exact_cost(instance, design.controller, noise_std=noise_std)
         stderr = 0.0

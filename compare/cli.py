@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import sys
+from contextlib import contextmanager
 from importlib import resources
 from pathlib import Path
 
@@ -60,15 +61,61 @@ def _check_file(path: Path, option: str = "--store") -> None:
         raise UserError(f"{option} {path} is a folder; give the result store file")
 
 
-def _open_store(path: Path):
+def _check_writable(path: Path, option: str = "--out") -> None:
+    """The folder (or the nearest folder above it that exists) must be writable, checked before any work."""
+    for part in (path, *path.parents):
+        if part.exists():
+            if not os.access(part, os.W_OK | os.X_OK):
+                where = "" if part == path else f" (its parent {part} is not writable)"
+                raise UserError(f"{option} {path} is not writable{where}; give a folder you can write to")
+            return
+
+
+def _open_store(path: Path, *, create: bool = True):
     from .store import Store, StoreError
 
     try:
-        return Store(path)
+        return Store(path, create=create)
     except StoreError as exc:
         raise UserError(str(exc)) from None
     except OSError as exc:
         raise UserError(f"cannot open the result store {path}: {exc.strerror or exc}") from None
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+@contextmanager
+def _interrupt_on_sigterm():
+    """SIGTERM ends a run as Ctrl-C does: workers stopped, claims released, a line saying what is stored."""
+    import signal
+
+    try:
+        previous = signal.signal(signal.SIGTERM, _interrupt)
+    except ValueError:  # not the main thread: leave the default
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+@contextmanager
+def _store_for_run(path: Path):
+    """The store a run writes; one this command created is removed again if the command fails before any run."""
+    created = not path.exists()
+    store = _open_store(path)
+    try:
+        yield store
+    except BaseException:
+        empty = len(store) == 0
+        store.close()
+        if created and empty:
+            path.unlink(missing_ok=True)
+        raise
+    store.close()
 
 
 def _preset_names() -> list[str]:
@@ -96,8 +143,13 @@ def _report(records, out: Path, *, meta: dict, members: dict, superseded: int, l
     commands.append(f"compare report --out {out}")
     title = "Comparison report: " + ", ".join(sorted(specs)) if specs else "Comparison report"
     # software is None from a store: the report prints the installed versions.
-    return write_report(records, out, specs=specs, title=title, commands=commands, load_controller=load_controller,
-                        meta=meta, members=members, superseded=superseded, software=software)
+    try:
+        return write_report(records, out, specs=specs, title=title, commands=commands,
+                            load_controller=load_controller, meta=meta, members=members, superseded=superseded,
+                            software=software)
+    except OSError as exc:
+        raise UserError(f"cannot write the report to {out}: {exc.strerror or exc} (stored runs are kept; "
+                        "`compare report` writes it again)") from None
 
 
 def _write_report(store, out: Path) -> dict:
@@ -161,11 +213,14 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
     """
     if workers is not None and workers < 1:
         raise UserError(f"--workers must be >= 1, got {workers}")
+    if executor not in ("process", "dask-local") and not executor.startswith(("dask://", "tcp://")):
+        # Checked here too (open_executor says the same) so that it answers before the methods are imported.
+        raise UserError(f"unknown executor {executor!r}: use 'process', 'dask-local' or 'dask://HOST:PORT'")
     if out is not None:
         _check_folder(out)
     if store_path is not None:
         _check_file(store_path)
-    from .runner import ExecutorError, StoreBusy, run_experiment
+    from .runner import ExecutorError, StoreBusy, open_executor, run_experiment
     from .spec import SpecError, load_spec
 
     try:
@@ -175,21 +230,25 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
     workers = workers or os.cpu_count() or 1
     out = out or RESULTS / spec.name
     _check_folder(out)
-    store = _open_store(_store_path(out, store_path))
-    with store:
-        try:
-            summary = run_experiment(spec, store, workers=workers, progress=progress,
-                                     executor=None if executor == "process" else executor, wait_for_others=wait)
-        except (ExecutorError, StoreBusy) as exc:
-            raise UserError(str(exc)) from None
-        except KeyboardInterrupt:
-            click.echo(f"\ninterrupted: {len(store)} runs are stored in {store.path}; "
-                       "run the same command again to resume.", err=True)
-            sys.exit(130)
-        click.echo(str(summary))
-        command = f"compare run {experiment}" + (f" --out {out}" if out != RESULTS / spec.name else "")
-        store.set_meta(f"command:{spec.name}", command)
-        files = _write_report(store, out)
+    _check_writable(out)
+    path = _store_path(out, store_path)
+    _check_writable(path.parent, "--store")
+    try:
+        # The executor first: an address that does not work is refused before a store is created.
+        with _interrupt_on_sigterm(), open_executor(executor, workers) as pool, _store_for_run(path) as store:
+            try:
+                summary = run_experiment(spec, store, workers=workers, progress=progress, executor=pool,
+                                         wait_for_others=wait)
+            except KeyboardInterrupt:
+                click.echo(f"\ninterrupted: {len(store)} runs are stored in {store.path}; "
+                           "run the same command again to resume.", err=True)
+                sys.exit(130)
+            click.echo(str(summary))
+            command = f"compare run {experiment}" + (f" --out {out}" if out != RESULTS / spec.name else "")
+            store.set_meta(f"command:{spec.name}", command)
+            files = _write_report(store, out)
+    except (ExecutorError, StoreBusy) as exc:
+        raise UserError(str(exc)) from None
     click.echo(f"report: {files['md']}")
 
 
@@ -217,7 +276,8 @@ def report(out, store_path):
     if not path.is_file():
         rebuild = "" if store_path is not None else f" and no runs.csv or report.json in {out} to rebuild from"
         raise UserError(f"no result store at {path}{rebuild}; run `compare run` first or pass --store")
-    with _open_store(path) as store:
+    _check_writable(out)
+    with _open_store(path, create=False) as store:
         if len(store) == 0:
             raise UserError(f"the store {path} holds no runs")
         files = _write_report(store, out)
@@ -268,7 +328,7 @@ def export(out, store_path, report_dir, fmt):
         raise UserError(str(exc)) from None
     from .export import write_designs
 
-    with _open_store(path) as store:
+    with _open_store(path, create=False) as store:
         if len(store) == 0:
             raise UserError(f"the store {path} holds no runs")
         frame = store.to_pandas()

@@ -73,8 +73,8 @@ class ComputeCell:
 
 
 def _nodes(record) -> int:
-    n = record.instance.n if record.instance.n is not None else record.instance.spec.get("n")
-    return int(n)
+    """N of the record's instance: the spec's node count, else the stored state count, else 0 (unknown)."""
+    return record.instance.nodes or 0
 
 
 def _runs(records: Records) -> dict[tuple, dict]:
@@ -354,7 +354,7 @@ def compute_markdown(cells) -> str:
                 row.append("not run")
                 continue
             if c.completed < c.runs:
-                notes.setdefault(label, (n, c))
+                notes[(label, n)] = c
             if c.completed == 0:
                 row.append(f"none of {c.runs} runs completed")
                 continue
@@ -368,7 +368,7 @@ def compute_markdown(cells) -> str:
     if notes:
         text += "\n\nRuns that did not complete (no usable design, or refused by a size guard):\n\n" + "\n".join(
             f"- {label}, N = {n}: {c.runs - c.completed} of {c.runs}" + (f": {c.why_not[:200]}" if c.why_not else "")
-            for label, (n, c) in sorted(notes.items()))
+            for (label, n), c in sorted(notes.items()))
     return text
 
 

@@ -16,10 +16,14 @@ and ``compare export`` all use it. Columns, in order:
   (wall time, scoring included), ``run_designs`` and ``run_peak_mb`` (its process's
   peak resident memory, MB);
 * one column per hyperparameter found in any design (``gamma``, ``beta``,
-  ``steps``, ...), empty (NaN) where a design has none. A hyperparameter named
-  like a column above (``seed`` of a learned method, ``horizon`` of SLS) is
-  ``param_<name>``. Then ``params``, all of a design's hyperparameters as JSON
-  with sorted keys, a handy key for ``groupby`` (which drops NaN groups);
+  ``steps``, ...), empty (NaN) where a design has none. A hyperparameter is
+  ``param_<name>`` when its name is another column of this table, ``params``, or
+  an instance field of any registered family (:func:`instance_field_names`), whether
+  or not this table's instances have that field: ``seed`` of a learned method and
+  ``horizon`` of a method of yours are always ``param_seed`` and ``param_horizon``,
+  so a bare ``horizon`` column is always the instance's. Then ``params``, all of a
+  design's hyperparameters as JSON with sorted keys, a handy key for ``groupby``
+  (which drops NaN groups);
 * ``extra_<key>`` for each scalar entry of the designs' extras
   (``extra_spectral_radius``, ``extra_noise_cost``, ...); list- and dict-valued
   extras (training curves) are left out: :meth:`Store.records` has them.
@@ -44,7 +48,8 @@ from pathlib import Path
 
 from .records import as_records
 
-__all__ = ["FORMATS", "MissingExtra", "require_pandas", "designs_frame", "write_designs"]
+__all__ = ["FORMATS", "MissingExtra", "require_pandas", "designs_frame", "write_designs", "instance_field_names",
+           "param_column_names"]
 
 #: Formats ``compare export`` writes, and the file each gives.
 FORMATS = {"csv": "designs.csv", "parquet": "designs.parquet"}
@@ -76,6 +81,31 @@ def require_pandas(fmt: str = "csv"):
             raise MissingExtra(f"writing parquet needs pyarrow, which comes with the 'analysis' extra: {_INSTALL}") \
                 from None
     return pandas
+
+
+def instance_field_names() -> frozenset:
+    """Every name an instance spec may use as a field: the ones listed above and each registered family's."""
+    from .families import family_names, get_family
+
+    names = set(_INSTANCE_ORDER)
+    for name in family_names():
+        names |= get_family(name).fields
+    return frozenset(names)
+
+
+def param_column_names(param_keys, instance_keys=()) -> dict[str, str]:
+    """Hyperparameter -> its column: ``param_<name>`` where the bare name is taken (see the module docstring).
+
+    Parameters
+    ----------
+    param_keys : iterable of str
+        Hyperparameter names found in the designs.
+    instance_keys : iterable of str
+        The instance fields the table has columns for (a plug-in family's may be
+        unregistered in this process).
+    """
+    taken = set(_IDENTITY) | set(_OUTCOME) | {"params"} | set(instance_keys) | instance_field_names()
+    return {k: f"param_{k}" if k in taken else k for k in param_keys}
 
 
 def _is_scalar(value) -> bool:
@@ -129,9 +159,7 @@ def designs_frame(records, members: dict | None = None):
     instance_keys = list(dict.fromkeys(k for inst in records.instances for k in inst.spec))
     instance_keys = [k for k in _INSTANCE_ORDER if k in instance_keys] + sorted(
         k for k in instance_keys if k not in _INSTANCE_ORDER)
-    reserved = set(_IDENTITY) | set(_OUTCOME) | set(instance_keys) | {"params"}
-    param_keys = sorted({k for r in records for k in r.params})
-    param_columns = {k: f"param_{k}" if k in reserved else k for k in param_keys}
+    param_columns = param_column_names(sorted({k for r in records for k in r.params}), instance_keys)
     extras_seen: dict[str, bool] = {}
     for r in records:
         for key, value in r.extras.items():

@@ -110,7 +110,7 @@ def _import(plugin: Plugin):
         sys.modules[name] = module
         try:
             spec.loader.exec_module(module)
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:  # a plug-in's sys.exit must not end the command silently
             del sys.modules[name]
             raise PluginError(f"plugin {plugin.ref!r}: importing {plugin.target} raised "
                               f"{type(exc).__name__}: {exc}") from None
@@ -124,7 +124,7 @@ def _import(plugin: Plugin):
             raise PluginError(f"plugin {plugin.ref!r}: no module named {plugin.target!r} (searched "
                               f"{', '.join(plugin.search) or 'sys.path'} and the installed packages)") from None
         raise PluginError(f"plugin {plugin.ref!r}: importing it raised ModuleNotFoundError: {exc}") from None
-    except Exception as exc:
+    except (Exception, SystemExit) as exc:
         raise PluginError(f"plugin {plugin.ref!r}: importing it raised {type(exc).__name__}: {exc}") from None
     finally:
         # A module name keeps resolving in this process once imported; the path need not stay.

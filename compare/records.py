@@ -12,8 +12,8 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field, fields, replace
-from functools import cached_property, lru_cache
+from dataclasses import dataclass, field, fields
+from functools import cached_property
 from types import MappingProxyType
 from typing import Any
 
@@ -31,20 +31,62 @@ def canonical_key(mapping: Mapping) -> str:
 def panel_key(spec: Mapping) -> tuple:
     """The panel an instance belongs to: (family, n, a_norm), a_norm None for families without one.
 
-    (None, not NaN: NaN keys never compare equal, so panels keyed by NaN cannot be looked up.)
+    (None, not NaN, for a family without one. A NaN ``a_norm``, which the spec of a run
+    that failed may hold, becomes :data:`PANEL_NAN`: a plain NaN never equals itself, so
+    a panel keyed by it could not be looked up, matched or sorted.)
     """
-    return (spec.get("family", "?"), spec.get("n", 0), spec.get("a_norm"))
+    a_norm = spec.get("a_norm")
+    if isinstance(a_norm, float) and math.isnan(a_norm):
+        a_norm = PANEL_NAN
+    return (spec.get("family", "?"), spec.get("n", 0), a_norm)
+
+
+class _PanelNaN(float):
+    """A NaN that a panel key can hold: equal to itself, one hash, ordered after every number.
+
+    Figures match, sort and format panels' ``a_norm`` like any float (``f"{a:g}"`` is
+    ``nan``); Python asks a float subclass's reflected comparison first, so
+    ``1.05 < PANEL_NAN`` is True too.
+    """
+
+    def __new__(cls):
+        return super().__new__(cls, "nan")
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, float) and math.isnan(other)
+
+    def __ne__(self, other) -> bool:
+        return not self == other
+
+    def __hash__(self) -> int:
+        return hash("a_norm = nan")
+
+    def __lt__(self, other) -> bool:
+        return False
+
+    def __le__(self, other) -> bool:
+        return self == other
+
+    def __gt__(self, other) -> bool:
+        return not self == other
+
+    def __ge__(self, other) -> bool:
+        return True
+
+    def __reduce__(self):
+        return _panel_nan, ()
+
+
+def _panel_nan() -> _PanelNaN:
+    return PANEL_NAN
+
+
+#: The ``a_norm`` of a panel whose spec has NaN there (:func:`panel_key`).
+PANEL_NAN = _PanelNaN()
 
 
 def _frozen(mapping: Mapping | None) -> Mapping:
     return MappingProxyType(dict(mapping or {}))
-
-
-@lru_cache(maxsize=None)
-def _rebuilt_facts(key: str) -> dict:
-    from .runner import build_instance, instance_facts
-
-    return instance_facts(build_instance(json.loads(key)))
 
 
 @dataclass(frozen=True)
@@ -52,6 +94,10 @@ class InstanceRecord:
     """One problem instance: its spec, canonical key and the facts the runner stored about it.
 
     Equality and hashing use ``key`` alone, so an InstanceRecord can key a dict.
+    Nothing here builds the instance: a report reads what the store holds, and
+    says nothing (or falls back to the spec) where it holds nothing. The runner
+    stores no facts for an instance it cannot build (a failed run's), and stores
+    written before instance facts were recorded have none.
 
     Parameters
     ----------
@@ -59,10 +105,14 @@ class InstanceRecord:
         The spec fields (``family``, ``n``, ``a_norm``, ``seed``, ...), read-only.
     key : str
         :func:`canonical_key` of ``spec``.
-    n, plant_links, comm_links : int or None
-        Nodes, and directed off-diagonal links of the plant and of the
-        communication graph (:func:`compare.runner.instance_facts`); None where
-        the store holds no facts for the instance (see :meth:`with_facts`).
+    n : int or None
+        States of the instance (``Instance.n``, which is the node count only when
+        each node has one state; the spec's ``n`` is the node count).
+    plant_links, comm_links : int or None
+        Directed off-diagonal links of the plant and of the communication graph
+        (:func:`compare.runner.instance_facts`).
+
+    Each fact is None where the store holds none for the instance.
     """
 
     spec: Mapping[str, Any] = field(compare=False)
@@ -96,19 +146,15 @@ class InstanceRecord:
         return panel_key(self.spec)
 
     @property
+    def nodes(self) -> int | None:
+        """The node count as the spec gives it (``n``), else the stored state count, else None."""
+        n = self.spec.get("n", self.n)
+        return n if isinstance(n, int) and not isinstance(n, bool) else None
+
+    @property
     def has_facts(self) -> bool:
+        """Whether the store holds every fact about this instance."""
         return None not in (self.n, self.plant_links, self.comm_links)
-
-    def with_facts(self) -> InstanceRecord:
-        """This instance with its facts, rebuilding the instance if the store has none.
-
-        The one fallback for stores written before the runner recorded instance
-        facts (and for records made by hand): the instance is built from its spec,
-        once per spec and process, which takes seconds for large instances.
-        """
-        if self.has_facts:
-            return self
-        return replace(self, **_rebuilt_facts(self.key))
 
 
 @dataclass(frozen=True)

@@ -68,13 +68,16 @@ def plant_links(records) -> dict:
 
     Below this many links no communication graph relaying one hop per step is
     quadratically invariant, so no convex delay-constrained (SLS) design exists
-    there. Link counts are the instance facts the store holds
-    (:meth:`~compare.records.InstanceRecord.with_facts` for stores without them).
+    there. Link counts are the instance facts the store holds; the instance is never
+    rebuilt, so a panel none of whose instances has a stored count (instances the
+    runner could not build, a store written before facts were recorded) has no entry,
+    and no boundary is drawn there.
     """
     out = {}
     for panel, rs in as_records(records).by_panel.items():
-        links = [inst.plant_links if inst.has_facts else inst.with_facts().plant_links for inst in rs.instances]
-        out[panel] = float(np.median(links))
+        links = [inst.plant_links for inst in rs.instances if inst.plant_links is not None]
+        if links:
+            out[panel] = float(np.median(links))
     return out
 
 
@@ -156,8 +159,9 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     ----------
     records : Records or list of dict
         :meth:`compare.store.Store.records` (dicts shaped like the store's rows are
-        converted; their instances' facts are then rebuilt, see
-        :meth:`compare.records.InstanceRecord.with_facts`).
+        converted, :meth:`compare.records.Records.from_rows`). No instance is built:
+        what the report draws about an instance comes from the facts stored with
+        its runs, and is left out where there are none.
     out : str or Path
         Output folder (created).
     specs : dict, optional

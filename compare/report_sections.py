@@ -84,6 +84,22 @@ def topology_path(records, meta: dict) -> tuple[list, str | None]:
     return [], None
 
 
+def _instance_to_draw(instance, build_instance):
+    """The instance the topology figure draws, or None: the one figure that needs an instance's matrices.
+
+    The store keeps no matrices, so the instance is built, but only where the runner
+    stored its facts, which it does once it has built the instance itself: an instance
+    that could not be built (or one of a store without facts) is never attempted, and a
+    build that fails all the same leaves the figure out instead of the report.
+    """
+    if not instance.has_facts:
+        return None
+    try:
+        return build_instance(dict(instance.spec))
+    except Exception:  # a family or file that changed since the run: the report goes on without the figure
+        return None
+
+
 def learning_sections(records: Records, save, styles: dict, load_controller, meta: dict,
                       members: dict) -> tuple[list[str], dict]:
     """Sections the data asks for: Table 1 and training curves of the experiments that declare them,
@@ -122,10 +138,9 @@ def learning_sections(records: Records, save, styles: dict, load_controller, met
             if support is not None:
                 supports[(r.run_key, r.idx)] = np.asarray(support) != 0
                 entries.append((r.params[weight], r.links, r.cost, support))
-        if len(entries) >= 2:
-            # The figure draws the instance's matrices, which the store does not keep.
+        built = _instance_to_draw(instance, build_instance) if len(entries) >= 2 else None
+        if built is not None:
             symbol = "β" if weight == "beta" else weight
-            built = build_instance(dict(instance.spec))
             fig, _ = plot_topology_path(built, entries, symbol=symbol)
             save(fig, "topologies")
             inst = ", ".join(f"{k} = {v}" for k, v in spec.items())

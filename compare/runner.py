@@ -27,6 +27,7 @@ from codesign.scoring import evaluate
 from .environment import environment
 from .fingerprint import fingerprint_details
 from .plugins import load_plugins
+from .pool import WorkerPool
 from .records import canonical_key
 from .registry import get_method
 from .spec import ExperimentSpec, Run
@@ -43,6 +44,7 @@ __all__ = [
     "open_executor",
     "StoreBusy",
     "instance_facts",
+    "failed_run",
 ]
 
 # RAYON_NUM_THREADS: Clarabel's faer factorization runs on a rayon pool that otherwise takes every
@@ -69,8 +71,22 @@ def _evaluated(instance, designs, evaluation) -> list[Design]:
             for d in designs]
 
 
-def _failed(run: Run, exc: Exception) -> list[Design]:
-    return [Design.failure(run.method, run.params, "failed", f"{type(exc).__name__}: {exc}")]
+def _failed(run: Run, exc: BaseException) -> list[Design]:
+    if isinstance(exc, SystemExit):
+        return failed_run(run, f"the method called sys.exit({exc.code!r})")
+    return failed_run(run, f"{type(exc).__name__}: {exc}")
+
+
+def failed_run(run: Run, message: str, extras: dict | None = None) -> list[Design]:
+    """The designs recorded for a run that produced none: one ``failed`` design saying why."""
+    return [Design.failure(run.method, run.params, "failed", message, extras=dict(extras or {}))]
+
+
+def unsendable(run: Run, result: tuple, exc: Exception) -> tuple:
+    """The result recorded for a run whose designs cannot leave its worker (they do not pickle)."""
+    _, seconds, peak_mb = result
+    return (failed_run(run, f"its design could not be sent back from the worker process "
+                            f"({type(exc).__name__}: {exc}); a method's designs must pickle"), seconds, peak_mb)
 
 
 _STATUS_FILE = "/proc/self/status"
@@ -148,7 +164,7 @@ def execute_run(run: Run) -> tuple[list[Design], float, float | None]:
         try:
             instance = build_instance(run.instance)
             designs = _evaluated(instance, get_method(run.method)(instance, **run.params), run.evaluation)
-        except Exception as exc:  # a failing method is a recorded status, never a crashed sweep
+        except (Exception, SystemExit) as exc:  # a failing method is a recorded status, never a crashed sweep
             designs = _failed(run, exc)
     return designs, m["seconds"], m["peak_mb"]
 
@@ -180,7 +196,7 @@ def execute_task(runs: list[Run], plugins=()) -> list[tuple[list[Design], float,
             instances = [build_instance(run.instance) for run in runs]
             results = method.run_batch([(inst, run.params) for inst, run in zip(instances, runs)])
             results = [_evaluated(inst, designs, run.evaluation) for inst, designs, run in zip(instances, results, runs)]
-        except Exception:
+        except (Exception, SystemExit):
             results = None
     if results is None:
         return [execute_run(run) for run in runs]
@@ -260,18 +276,16 @@ class WorkerSetupError(ExecutorError):
 def open_executor(address: str, workers: int):
     """An executor for ``address``, closed on exit.
 
-    ``"process"`` (the default) is a local pool of ``workers`` processes;
+    ``"process"`` (the default) is a local :class:`~compare.pool.WorkerPool` of ``workers``
+    processes (a worker that dies or overruns its time fails its own run only);
     ``"dask-local"`` starts a local dask.distributed cluster of ``workers``
     single-threaded worker processes; ``"dask://HOST:PORT"`` (or ``tcp://``)
     connects to a running scheduler. Dask runs go through the client's
     ``concurrent.futures`` interface; only this process writes to the store.
     """
     if address == "process":
-        pool = make_executor(workers)
-        try:
+        with WorkerPool(workers) as pool:
             yield pool
-        finally:
-            pool.shutdown(wait=False, cancel_futures=True)
         return
     if address == "dask-local" or address.startswith(("dask://", "tcp://")):
         try:
@@ -329,13 +343,27 @@ class StoreBusy(RuntimeError):
 
 
 def _drain(pool: Executor, tasks: list[list[Run]], plugins, record) -> None:
+    """Run ``tasks`` on a ``concurrent.futures`` executor (dask's, or the caller's).
+
+    A task whose future fails (its results would not unpickle, its worker died) is
+    recorded as failed, run by run; a worker that cannot load the methods stops all.
+    Per-run time limits need the local :class:`~compare.pool.WorkerPool`.
+    """
     futures = {pool.submit(execute_task, task, plugins): task for task in tasks}
     try:
         remaining = set(futures)
         while remaining:
             finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
             for future in finished:
-                for run, result in zip(futures[future], future.result()):
+                task = futures[future]
+                try:
+                    results = future.result()
+                except WorkerSetupError:
+                    raise
+                except Exception as exc:  # noqa: BLE001 - the executor's failure is these runs' status
+                    message = f"the executor could not run it: {type(exc).__name__}: {exc}"
+                    results = [(failed_run(run, message), 0.0, None) for run in task]
+                for run, result in zip(task, results):
                     record(run, *result)
     except BaseException:
         for future in futures:
@@ -361,7 +389,7 @@ def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store) -> None:
         if key not in known:
             try:
                 facts = instance_facts(build_instance(spec_dict))
-            except Exception:  # the instance's runs record the failure; the report rebuilds what it needs
+            except Exception:  # the instance's runs record the failure; the report draws without its facts
                 continue
             store.set_instance_facts(spec_dict, facts)
 
@@ -401,6 +429,10 @@ def run_experiment(
     start = time.perf_counter()
     runs = list({run.key: run for run in spec.runs()}.values())
     _record_meta(spec, runs, store)
+    limits = store.timed_out()
+    # A run stored as stopped at its time limit is tried again when the spec now gives it longer.
+    store.forget(run.key for run in runs if run.key in limits
+                 and (getattr(run, "timeout", None) or float("inf")) > limits[run.key])
     done = store.done_keys()
     pending = [run for run in runs if run.key not in done]
     store.relabel({run.key: run.label for run in runs if run.key in done})
@@ -414,20 +446,37 @@ def run_experiment(
         summary.statuses.update(d.status for d in designs)
         bar.update(1)
 
+    running: Counter = Counter()
+
+    def show(runs, sign):
+        running.update({run.method: sign for run in runs})
+        bar.set_postfix_str(", ".join(f"{m} ×{k}" for m, k in sorted(running.items()) if k > 0), refresh=True)
+
+    def drain(pool, tasks):
+        if isinstance(pool, WorkerPool):
+            pool.drain(tasks, spec.plugins, record, on_start=lambda runs: show(runs, 1),
+                       on_finish=lambda runs: show(runs, -1))
+        else:
+            _drain(pool, tasks, spec.plugins, record)
+
     def compute(todo):
         tasks = plan_tasks(todo)
         if executor is None and workers <= 1:
             for task in tasks:
+                show(task, 1)
                 for run, result in zip(task, execute_task(task)):
                     record(run, *result)
-        elif isinstance(executor, Executor):
-            _drain(executor, tasks, spec.plugins, record)
+                show(task, -1)
+        elif isinstance(executor, (Executor, WorkerPool)):
+            drain(executor, tasks)
         else:
             with open_executor(executor or "process", workers) as pool:
-                _drain(pool, tasks, spec.plugins, record)
+                drain(pool, tasks)
 
     if pending:
-        executor_name = executor if isinstance(executor, str) else type(executor).__name__ if executor else "process"
+        executor_name = (executor if isinstance(executor, str)
+                         else "process" if executor is None or isinstance(executor, WorkerPool)
+                         else type(executor).__name__)
         store.set_meta(f"environment:{spec.name}", environment(1 if executor is None and workers <= 1 else workers,
                                                                executor_name))
     told = False

@@ -4,7 +4,7 @@ A spec names the instances (family, sizes, a_norms, seeds), the methods with
 their hyperparameters and grids, and evaluation settings. It expands into
 :class:`Run` objects, one per (instance, method entry, grid point)::
 
-    name = "quick"
+    name = "quick"               # a folder name (results/quick): letters, digits, _, - and ., not leading
     description = "..."
     plugins = ["my_methods", "more_methods.py"]   # optional: modules registering methods (top level,
                                                   # before any [table], or TOML reads it as a table key)
@@ -32,6 +32,8 @@ their hyperparameters and grids, and evaluation settings. It expands into
     params = { start = "lqr_diagonal" }
     grid = { }                   # lists of values, expanded as a cartesian product
     where = { a_norm = [1.05] }  # optional: only on instances with these field values
+    timeout = 600                # optional: seconds per run before its worker is stopped (the run is
+                                 # recorded failed); a top-level `timeout` sets it for every entry
 
     [[methods]]
     method = "my_methods:trunc10"   # a plain function f(instance, *, ...) in a module or a .py file
@@ -42,6 +44,9 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import math
+import os
+import re
 import sys
 from dataclasses import dataclass, field
 from importlib import resources
@@ -71,6 +76,17 @@ __all__ = [
 
 #: Report sections an experiment may ask for (``[report] sections``).
 SECTIONS = ("table1", "training_curves", "compute")
+
+#: An experiment's name is a folder name (``results/<name>``): letters, digits, ``_``, ``-`` and
+#: ``.``, not leading, so that it can never climb out of ``results/`` or hide there.
+_NAME = re.compile(r"[\w-][\w.-]*")
+
+#: The size guard's estimate of one run's peak memory, in dense float64 matrices of the
+#: instance's state dimension n: the instance's A, B, Q, R, P and its two graphs (7), and
+#: the cheapest method's work, centralized LQR's Riccati solve (scipy's
+#: ``solve_discrete_are``: a 3n x 3n matrix pencil and its QZ factors, about 34), rounded up.
+#: Instances whose estimate exceeds the machine's memory are refused when a spec is loaded.
+DENSE_MATRICES = 48
 
 
 class SpecError(ValueError):
@@ -108,6 +124,7 @@ class MethodSpec:
     params: dict = field(default_factory=dict)
     grid: dict = field(default_factory=dict)
     where: dict = field(default_factory=dict)
+    timeout: float | None = None
 
     def applies_to(self, instance: dict) -> bool:
         return all(instance.get(key) in values for key, values in self.where.items())
@@ -145,6 +162,8 @@ class Run:
     params: dict
     evaluation: EvaluationSpec
     fingerprint: str
+    #: Seconds the run may take before its worker is stopped (None: no limit); not part of the key.
+    timeout: float | None = None
 
     @property
     def key(self) -> str:
@@ -184,7 +203,7 @@ class ExperimentSpec:
         load_plugins(self.plugins)
         prints = {m.method: fingerprint(get_method(m.method)) for m in self.methods}
         return [
-            Run(instance, m.method, m.label, params, self.evaluation, prints[m.method])
+            Run(instance, m.method, m.label, params, self.evaluation, prints[m.method], m.timeout)
             for instance in self.instances.expand()
             for m in self.methods
             if m.applies_to(instance)
@@ -207,7 +226,7 @@ def load_spec(name_or_path: str | Path, *, plugins=()) -> ExperimentSpec:
     if text_path.suffix == ".toml" or text_path.exists():
         if not text_path.is_file():
             raise SpecError(f"spec file not found: {text_path}")
-        text = text_path.read_text()
+        text = _read_text(text_path)
         default_name = text_path.stem
         base = text_path.resolve().parent
     else:
@@ -218,6 +237,21 @@ def load_spec(name_or_path: str | Path, *, plugins=()) -> ExperimentSpec:
         default_name = name
         base = None
     return parse_spec(text, default_name=default_name, base=base, plugins=plugins)
+
+
+def _read_text(path: Path) -> str:
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise SpecError(f"cannot read spec file {path}: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SpecError(f"{path} is not a text TOML file (byte 0x{data[exc.start]:02x} at offset {exc.start} "
+                        "is not UTF-8)") from None
+    if "\x00" in text:  # valid UTF-8, but binary all the same
+        raise SpecError(f"{path} is not a text TOML file (a NUL byte at offset {data.index(0)})")
+    return text
 
 
 def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path | None = None,
@@ -232,7 +266,8 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(f"spec is not valid TOML: {exc}") from None
-    _check_keys("spec", data, {"name", "description", "instances", "methods", "evaluation", "plugins", "report"})
+    _check_keys("spec", data, {"name", "description", "instances", "methods", "evaluation", "plugins", "report",
+                               "timeout"})
     refs = [("--plugin", ref) for ref in plugins]
     raw_plugins = data.get("plugins", [])
     if not isinstance(raw_plugins, list):
@@ -247,7 +282,7 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
             raise SpecError(f"{where}: {exc}") from None
         loaded.append(plugin)
     sections, pairs = _parse_report(_typed("report", data.get("report", {}), dict))
-    name = _typed("name", data.get("name", default_name), str)
+    name = _check_name(_typed("name", data.get("name", default_name), str), given="name" in data)
     description = _typed("description", data.get("description", ""), str)
     if "instances" not in data:
         raise SpecError("spec: missing [instances] table")
@@ -259,8 +294,30 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
     from .families import get_family
 
     fields = {"family"}.union(*(get_family(name).fields for name in instances.families))
-    methods = tuple(_parse_method(i, entry, base, loaded, fields) for i, entry in enumerate(raw_methods))
+    timeout = _parse_timeout("timeout", data.get("timeout"))
+    methods = tuple(_parse_method(i, entry, base, loaded, fields, timeout) for i, entry in enumerate(raw_methods))
+    _check_pairs(pairs, methods)
     return ExperimentSpec(name, description, instances, methods, evaluation, text, tuple(loaded), sections, pairs)
+
+
+def _check_name(name: str, *, given: bool) -> str:
+    """The experiment's name, which the CLI makes a folder under ``results/``: a plain folder name only."""
+    if _NAME.fullmatch(name):
+        return name
+    rule = "a plain folder name (letters, digits, '_', '-' and '.', not leading)"
+    if given:
+        raise SpecError(f"name: must be {rule}, got {name!r}")
+    raise SpecError(f"name: the spec file's name {name!r} is not {rule}; set name = \"...\" in the spec")
+
+
+def _check_pairs(pairs: tuple, methods: tuple) -> None:
+    """Every label a ``[report] pairs`` entry names is a method entry's label or method name."""
+    known = list(dict.fromkeys([m.label for m in methods] + [m.method for m in methods]))
+    for i, pair in enumerate(pairs):
+        for x in pair:
+            if x not in known:
+                raise SpecError(f"report.pairs[{i}]: {x!r} is no method entry's label or method name "
+                                f"(known: {', '.join(repr(k) for k in known)})")
 
 
 def _parse_report(table: dict) -> tuple[tuple, tuple]:
@@ -290,6 +347,8 @@ def _typed(where: str, value, kind):
     ok = isinstance(value, kind) and not (kind in (int, float) and isinstance(value, bool))
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
+    if kind is float and ok and not math.isfinite(value):
+        raise SpecError(f"{where}: expected a finite number, got {value!r}")
     if not ok:
         kind_name = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
         raise SpecError(f"{where}: expected {kind_name}, got {type(value).__name__} {value!r}")
@@ -323,8 +382,49 @@ def _parse_instances(table, base) -> InstanceSpec:
         except UnknownFamilyError as exc:
             raise SpecError(f"{where}.family: {exc}") from None
         names.append(name)
-        specs.extend(family.parse(entry, base))
+        parsed = family.parse(entry, base)
+        _check_memory(where, family, parsed)
+        specs.extend(parsed)
     return InstanceSpec(families=tuple(dict.fromkeys(names)), specs=tuple(specs))
+
+
+def _machine_memory() -> int | None:
+    """This machine's physical memory in bytes, None where it cannot be told."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):  # not POSIX
+        try:
+            import psutil
+        except ImportError:
+            return None
+        return int(psutil.virtual_memory().total)
+
+
+def _bytes_text(size: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+        if size < 1024 or unit == "TiB":
+            return f"{size:.3g} {unit}" if unit != "B" else f"{size:.0f} B"
+        size /= 1024
+
+
+def _check_memory(where: str, family, specs, memory: int | None = None) -> None:
+    """Refuse instances whose run would not fit this machine's memory (:data:`DENSE_MATRICES` estimate)."""
+    memory = _machine_memory() if memory is None else memory
+    if not memory:
+        return
+    largest_states = math.isqrt(memory // (DENSE_MATRICES * 8))
+    for spec in specs:
+        states = family.states(spec)
+        if not isinstance(states, int) or states <= largest_states:
+            continue
+        nodes = spec.get("n", states)
+        need = DENSE_MATRICES * 8 * states ** 2
+        shown = f"n = {nodes}" + (f" ({states} states)" if states != nodes else "")
+        raise SpecError(
+            f"{where}.n: {shown} needs about {_bytes_text(need)} per run, more than this machine's "
+            f"{_bytes_text(memory)} of memory (estimate: {DENSE_MATRICES} dense {states} x {states} float64 "
+            f"matrices, the instance and centralized LQR's Riccati solve); the largest n that fits is "
+            f"{largest_states * nodes // states}")
 
 
 def _parse_evaluation(table: dict) -> EvaluationSpec:
@@ -338,10 +438,20 @@ def _parse_evaluation(table: dict) -> EvaluationSpec:
     return EvaluationSpec(size, noise)
 
 
-def _parse_method(index: int, entry, base, plugins: list, fields=frozenset()) -> MethodSpec:
+def _parse_timeout(where: str, value) -> float | None:
+    """A time limit in seconds (a positive finite number), or None for none."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise SpecError(f"{where}: must be a positive number of seconds, got {value!r}")
+    return float(value)
+
+
+def _parse_method(index: int, entry, base, plugins: list, fields=frozenset(), timeout=None) -> MethodSpec:
     where = f"methods[{index}]"
     entry = _typed(where, entry, dict)
-    _check_keys(where, entry, {"method", "label", "params", "grid", "where"})
+    _check_keys(where, entry, {"method", "label", "params", "grid", "where", "timeout"})
+    timeout = _parse_timeout(f"{where}.timeout", entry["timeout"]) if "timeout" in entry else timeout
     if "method" not in entry:
         raise SpecError(f"{where}.method: missing (which registered method to run)")
     name = _typed(f"{where}.method", entry["method"], str)
@@ -378,4 +488,4 @@ def _parse_method(index: int, entry, base, plugins: list, fields=frozenset()) ->
                             f"{', '.join(sorted(fields))})")
         if not isinstance(values, list) or not values:
             raise SpecError(f"{where}.where.{key}: expected a non-empty list of values, got {values!r}")
-    return MethodSpec(name, label, dict(params), dict(grid), dict(filters))
+    return MethodSpec(name, label, dict(params), dict(grid), dict(filters), timeout)

@@ -28,7 +28,7 @@ from codesign.controllers import controller_from_arrays
 
 from .records import Records, canonical_key
 
-__all__ = ["Store", "StoreError"]
+__all__ = ["Store", "StoreError", "APPLICATION_ID", "SCHEMA_VERSION"]
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -84,6 +84,18 @@ _FACTS = "instance:"
 #: A claim from another host with no heartbeat for this long is taken over.
 STALE_SECONDS = 6 * 3600.0
 
+#: SQLite's ``application_id`` of a result store ("GRNN"): what marks a file as one of ours.
+APPLICATION_ID = 0x47524E4E
+#: SQLite's ``user_version`` of the schema this code writes. 1: the columns of 2 but ``runs.peak_mb``;
+#: stores written before the mark existed are recognized by their tables and migrated as version 1.
+SCHEMA_VERSION = 2
+
+_TABLES = {"meta", "runs", "designs", "claims", "members"}
+_RUN_COLUMNS = ("run_key", "experiment", "instance", "method", "label", "params", "version", "n_designs", "seconds")
+_DESIGN_COLUMNS = ("run_key", "idx", "method", "label", "params", "cost", "cost_stderr", "cost_kind", "links",
+                   "self_loops", "info_model", "status", "message", "seconds", "controller_kind", "controller",
+                   "extras")
+
 
 def _alive(pid: int) -> bool:
     try:
@@ -97,6 +109,59 @@ def _alive(pid: int) -> bool:
 
 class StoreError(RuntimeError):
     """The store file is unreadable or not a result store."""
+
+
+def _inspect(path: Path) -> int:
+    """The schema version of the store at ``path``, read without writing a byte; StoreError if not a store.
+
+    A file marked with :data:`APPLICATION_ID` gives its ``user_version``; an unmarked one is a
+    store only if its tables are exactly a (pre-mark) store's, version 1. Anything else (another
+    program's database, a newer store, not SQLite at all) is refused before it is opened for writing.
+    """
+    try:
+        conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=30)
+    except sqlite3.Error as exc:
+        raise StoreError(_explain(path, exc)) from None
+    try:
+        app_id = conn.execute("PRAGMA application_id").fetchone()[0]
+        version = conn.execute("PRAGMA user_version").fetchone()[0]
+        tables = {row[0] for row in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        columns = {t: [row[1] for row in conn.execute(f"PRAGMA table_info({t})")] for t in tables & {"runs", "designs"}}
+    except sqlite3.DatabaseError as exc:
+        raise StoreError(_explain(path, exc)) from None
+    finally:
+        conn.close()
+    untouched = "; it was left untouched"
+    if app_id == APPLICATION_ID:
+        if version > SCHEMA_VERSION:
+            raise StoreError(f"{path} is a result store of a newer version of this toolkit (schema {version}; "
+                             f"this one reads up to {SCHEMA_VERSION}): upgrade grnn-codesign{untouched}")
+        return version
+    if app_id != 0:
+        raise StoreError(f"{path} is another program's SQLite database (application id {app_id:#x}), "
+                         f"not a result store{untouched}")
+    legacy = (tables and tables <= _TABLES and {"meta", "runs", "designs"} <= tables
+              and tuple(columns["runs"][:len(_RUN_COLUMNS)]) == _RUN_COLUMNS
+              and tuple(columns["designs"]) == _DESIGN_COLUMNS)
+    if not legacy:
+        found = ", ".join(sorted(tables)) or "no tables"
+        raise StoreError(f"{path} is an SQLite database but not a result store ({found}){untouched}")
+    return 1
+
+
+def _explain(path: Path, exc: sqlite3.Error) -> str:
+    """A one-line reason for an SQLite error on opening ``path``: locked, unwritable, or not a store."""
+    text = str(exc)
+    if "locked" in text or "busy" in text:
+        return f"the result store {path} is locked by another process (still writing after 30 s); try again later"
+    if "readonly" in text or "read-only" in text:
+        return f"the result store {path} is read-only: {text}"
+    if "unable to open" in text:
+        folder = path.parent if path.parent != Path("") else Path(".")
+        if folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK):
+            return f"cannot create the result store {path}: the folder {folder} is not writable"
+        return f"cannot open the result store {path}: {text}"
+    return f"{path} is not a usable result store: {text}; it was left untouched"
 
 
 def _npz(arrays: dict) -> bytes:
@@ -113,30 +178,49 @@ def _float_or_none(value):
 class Store:
     """A SQLite result store.
 
+    A store marks itself (SQLite's ``application_id`` :data:`APPLICATION_ID` and
+    ``user_version`` :data:`SCHEMA_VERSION`); opening any other file raises
+    :class:`StoreError` before a byte of it is written, and an older store is
+    migrated in one transaction.
+
     Parameters
     ----------
     path : str or Path
-        The database file; created (with its folder) if missing.
+        The database file; created (with its folder) if missing or empty.
+    create : bool
+        False refuses a missing file (readers: ``compare report`` and ``compare export``).
     """
 
-    def __init__(self, path):
+    def __init__(self, path, *, create: bool = True):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        new = not self.path.exists() or (self.path.is_file() and self.path.stat().st_size == 0)
+        if new and not create:
+            raise StoreError(f"no result store at {self.path}")
+        version = 0 if new else _inspect(self.path)
+        if new:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
             self._conn = sqlite3.connect(self.path, timeout=30)
             self._conn.execute("PRAGMA journal_mode=DELETE")
             self._conn.execute("PRAGMA synchronous=FULL")
-            self._conn.executescript(_SCHEMA)
-            self._migrate()
+            if version < SCHEMA_VERSION:
+                self._upgrade(version)
         except sqlite3.DatabaseError as exc:
-            raise StoreError(f"{self.path} is not a usable result store: {exc}") from None
+            raise StoreError(_explain(self.path, exc)) from None
 
-    def _migrate(self) -> None:
-        """Add the columns newer code writes to a store made by older code (their values stay NULL)."""
-        columns = {row[1] for row in self._conn.execute("PRAGMA table_info(runs)")}
-        if "peak_mb" not in columns:
-            with self._conn:
-                self._conn.execute("ALTER TABLE runs ADD COLUMN peak_mb REAL")
+    def _upgrade(self, version: int) -> None:
+        """Create the schema (``version`` 0) or migrate an older one, in one transaction: all of it or nothing."""
+        with self._conn:
+            self._conn.execute("BEGIN IMMEDIATE")
+            for statement in _SCHEMA.split(";"):
+                if statement.strip():
+                    self._conn.execute(statement)
+            if version == 1:
+                columns = {row[1] for row in self._conn.execute("PRAGMA table_info(runs)")}
+                if "peak_mb" not in columns:
+                    self._conn.execute("ALTER TABLE runs ADD COLUMN peak_mb REAL")
+            self._conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+            self._conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def close(self) -> None:
         self._conn.close()
@@ -239,6 +323,27 @@ class Store:
                 self._conn.execute("UPDATE claims SET heartbeat = ? WHERE owner = ?", (time.time(), owner))
         return True
 
+    def timed_out(self) -> dict[str, float]:
+        """Stored runs that stopped at their time limit: ``run_key -> limit`` in seconds."""
+        out = {}
+        for key, extras in self._conn.execute(
+                "SELECT run_key, extras FROM designs WHERE status = 'failed' AND extras LIKE '%timeout_s%'"):
+            limit = json.loads(extras).get("timeout_s") if extras else None
+            if limit is not None:
+                out[key] = float(limit)
+        return out
+
+    def forget(self, keys) -> int:
+        """Delete stored runs and their designs (one transaction); returns how many were stored.
+
+        Used for runs stored as stopped at a time limit when the experiment now allows them more.
+        """
+        keys = list(keys)
+        with self._conn:
+            self._conn.executemany("DELETE FROM designs WHERE run_key = ?", [(k,) for k in keys])
+            removed = sum(self._conn.execute("DELETE FROM runs WHERE run_key = ?", (k,)).rowcount for k in keys)
+        return removed
+
     def relabel(self, labels: dict[str, str]) -> int:
         """Set the legend label of stored runs (``run_key -> label``); returns how many changed.
 
@@ -283,9 +388,9 @@ class Store:
         Current means named by an experiment's latest ``compare run`` (see
         :meth:`set_members`); a store without membership records gives every
         design. Each design's :class:`~compare.records.InstanceRecord` carries the
-        instance facts the runner stored; a store written before instance facts
-        were recorded leaves them None (:meth:`~compare.records.InstanceRecord.with_facts`
-        rebuilds them).
+        instance facts the runner stored; they are None for an instance the runner
+        could not build, and in stores written before facts were recorded (reports
+        then draw without them; nothing is rebuilt).
         """
         query = """
             SELECT d.run_key, d.idx, r.experiment, r.instance, d.method, d.label, d.params, d.cost,

@@ -12,7 +12,8 @@
 # # First steps: one instance, five designs, one figure, then your own system and method
 #
 # This notebook is a [jupytext](https://jupytext.readthedocs.io) script: open it in
-# Jupyter (with jupytext installed) or run it as `python examples/first_steps.py`.
+# Jupyter (with jupytext installed) or run it as `python examples/first_steps.py`
+# (from the checkout: the figure is then saved as `results/first_steps.png`, which git ignores).
 # `EXAMPLES_SMALL=1` runs a reduced version (shorter training; CI runs it so).
 #
 # Every method takes an `Instance` and keyword-only hyperparameters and returns a
@@ -105,7 +106,12 @@ def plot_designs(designs, ax=None):
 fig, ax = plt.subplots(figsize=(7, 4.5))
 plot_designs(designs, ax=ax)
 fig.tight_layout()
-fig.savefig("first_steps.png", dpi=110)
+# In a notebook the figure shows below the cell. Run as a script, nothing shows, so it is
+# saved into results/ (which git ignores) under the working folder, as `compare run` does.
+if "__file__" in globals():
+    os.makedirs("results", exist_ok=True)
+    fig.savefig(os.path.join("results", "first_steps.png"), dpi=110)
+    print("figure: results/first_steps.png")
 
 # %% [markdown]
 # ## Your own system

@@ -16,6 +16,8 @@ def test_first_steps_notebook_runs_and_plots_four_methods(tmp_path, monkeypatch)
     namespace = runpy.run_path(str(EXAMPLE), run_name="__main__")
     _, labels = namespace["ax"].get_legend_handles_labels()
     assert len(labels) >= 4, labels
-    assert (tmp_path / "first_steps.png").stat().st_size > 10_000
+    # Run as a script, the figure goes to results/ (git-ignored), never beside the checkout's tracked files.
+    assert (tmp_path / "results" / "first_steps.png").stat().st_size > 10_000
+    assert [p.name for p in tmp_path.iterdir()] == ["results"]
     design = namespace["d"]
     assert design.method == "nearest_lqr" and design.cost_kind == "exact" and design.cost >= 1 - 1e-9

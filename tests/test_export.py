@@ -105,6 +105,23 @@ def test_designs_frame_types_do_not_depend_on_the_methods_present():
     assert len(empty) == 0 and {"method", "cost", "links"} <= set(empty.columns)
 
 
+def test_a_hyperparameter_named_like_an_instance_field_is_prefixed_whatever_the_instances_hold():
+    """`horizon` of a method is `param_horizon` on a family without a `horizon` field too; bare names stay bare."""
+    matrices = {"family": "matrices", "name": "ring", "n": 4, "file": "ring.npz", "sha256": "ab"}
+    paper = {"family": "paper", "n": 4, "seed": 0, "a_norm": 1.05, "horizon": 10}
+
+    def row(instance, params):
+        return {"run_key": "k", "idx": 0, "method": "m", "label": "M", "instance": instance, "params": params,
+                "cost": 1.0}
+
+    alone = designs_frame([row(matrices, {"horizon": 30, "neighbours": 2, "gamma": 0.1})])
+    assert {"param_horizon", "param_neighbours", "gamma"} <= set(alone.columns)
+    assert "horizon" not in alone.columns and "neighbours" not in alone.columns
+    mixed = designs_frame([row(matrices, {"horizon": 30}), row(paper, {"horizon": 20, "links": 3})])
+    assert list(mixed["param_horizon"]) == [30.0, 20.0] and list(mixed["param_links"].fillna(-1)) == [-1.0, 3.0]
+    assert list(mixed["horizon"].astype("Float64").fillna(-1)) == [-1.0, 10.0]  # the instance's, never a method's
+
+
 def test_cli_export_csv_reads_back_with_the_same_columns(store_path, tmp_path):
     out = tmp_path / "analysis"
     result = CliRunner().invoke(main, ["export", "--out", str(out), "--store", str(store_path)])

@@ -171,7 +171,7 @@ def test_mistyped_hyperparameter_with_none_default_is_exit_2(tmp_path):
     spec = _setup(tmp_path, spec=SPEC.replace('method = "lqr"', 'method = "truncated_lqr"\nparams = { links = "20" }'))
     result = _run("run", spec, "--out", tmp_path / "o", "--no-progress")
     assert result.exit_code == 2
-    assert "methods[0].params.links: expected list or None, got str '20'" in result.output
+    assert "methods[0].params.links: expected non-empty list of int >= 0 or None, got str '20'" in result.output
 
 
 def test_key_order_in_a_spec_does_not_change_keys(tmp_path):

@@ -62,7 +62,7 @@ def test_presets_ship_and_parse():
         (('method = "lqr"', 'method = "lqr"\nparams = { gamma = 1.0 }'), r"methods\[0\]\.params\.gamma: unknown hyperparameter"),
         (('method = "lqr"', 'method = "lqr"\ncolor = "red"'), r"methods\[0\]\.color: unknown key"),
         (('grid = { start = ["lqr_diagonal", "zero"] }', 'grid = { start = "zero" }'), r"methods\[1\]\.grid\.start: expected a non-empty list"),
-        (('grid = { start = ["lqr_diagonal", "zero"] }', 'grid = { start = [1, 2] }'), r"methods\[1\]\.grid\.start: expected str"),
+        (('grid = { start = ["lqr_diagonal", "zero"] }', 'grid = { start = [1, 2] }'), r"methods\[1\]\.grid\.start: expected 'lqr_diagonal' or 'zero', got int 1"),
         (("horizon = 10", "horizon = 10\n[evaluation]\nnoise_std = -1.0"), r"evaluation\.noise_std: must be >= 0"),
         (("horizon = 10", "horizon = 10\n[evaluation]\nsamples = 3"), r"evaluation\.samples: unknown key"),
         (("horizon = 10", "horizon = ["), r"not valid TOML"),

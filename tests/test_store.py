@@ -70,8 +70,10 @@ def test_a_store_from_before_peak_memory_gains_the_column_and_keeps_its_runs(tmp
     with Store(path) as store:
         run_experiment(spec, store, progress=False)
     con = sqlite3.connect(path)
-    with con:  # the runs table as stores had it before peak_mb (SQLite >= 3.35 drops columns)
+    with con:  # the runs table as stores had it before peak_mb (SQLite >= 3.35 drops columns), unmarked
         con.execute("ALTER TABLE runs DROP COLUMN peak_mb")
+        con.execute("PRAGMA application_id = 0")
+        con.execute("PRAGMA user_version = 0")
     con.close()
     with Store(path) as store:
         records = store.records()

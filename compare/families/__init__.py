@@ -39,6 +39,10 @@ def _whole(spec: dict) -> dict:
     return spec
 
 
+def _one_state_per_node(spec: dict) -> int | None:
+    return spec.get("n")
+
+
 @dataclass(frozen=True)
 class Family:
     """A named source of instances.
@@ -58,6 +62,10 @@ class Family:
     identity : callable ``(spec) -> dict``
         What a run key hashes of an instance spec (by default all of it); a family
         whose specs name files hashes their contents instead of their paths.
+    states : callable ``(spec) -> int or None``
+        How many states the instance a spec describes has (by default its ``n``,
+        one state per node; None: unknown), for the size guard that refuses, when
+        a spec is loaded, instances too large for the machine's memory.
     """
 
     name: str
@@ -66,6 +74,7 @@ class Family:
     build: Callable
     fields: frozenset = field(default_factory=frozenset)
     identity: Callable = _whole
+    states: Callable = _one_state_per_node
 
 
 def register_family(family: Family) -> Family:

@@ -88,6 +88,11 @@ def parse(table: dict, base=None) -> tuple:
                  for n in sizes for seed in seeds)
 
 
+def states(spec: dict) -> int:
+    """A position and a velocity per node."""
+    return 2 * spec["n"]
+
+
 def build(spec: dict):
     return mass_spring_instance(spec["n"], seed=spec["seed"], dt=spec["dt"], horizon=spec["horizon"], r=spec["r"])
 
@@ -97,5 +102,6 @@ MASS_SPRING = register_family(Family(
     summary="a chain of N masses and springs (position and velocity per node, one force input), lqrsp's example",
     parse=parse,
     build=build,
+    states=states,
     fields=frozenset({"n", "seed", "dt", "horizon", "r"}),
 ))

@@ -92,6 +92,11 @@ def parse(table: dict, base=None) -> tuple:
                  for n in sizes for seed in range(count))
 
 
+def states(spec: dict) -> int:
+    """A position and a velocity per node."""
+    return 2 * spec["n"]
+
+
 def build(spec: dict):
     return random_network_instance(spec["n"], seed=spec["seed"], dt=spec["dt"], horizon=spec["horizon"],
                                    neighbours=spec["neighbours"], side=spec["side"])
@@ -102,5 +107,6 @@ RANDOM_NETWORK = register_family(Family(
     summary="unstable second-order nodes placed at random, coupled by e^(-distance) (lqrsp's distributed system)",
     parse=parse,
     build=build,
+    states=states,
     fields=frozenset({"n", "seed", "dt", "horizon", "neighbours", "side"}),
 ))

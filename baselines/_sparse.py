@@ -16,6 +16,7 @@ import numpy as np
 from codesign.controllers import StaticGain
 from codesign.design import Design, count_links
 from codesign.evaluation import spectral_radius, static_gain_cost, static_gain_cost_and_grad
+from codesign.status import DIVERGED, INACCURATE, OPTIMAL, USABLE
 
 from .lqr import decentralized
 from .polish import GRAD_RTOL, polish_gain
@@ -74,7 +75,7 @@ def polished_gain(instance, K, mask, *, polish: bool = True) -> tuple[np.ndarray
 
 
 def gain_design(instance, method: str, params: dict, K, *, seconds: float, extras: dict,
-                polished: bool, status: str = "optimal", message: str = "") -> Design:
+                polished: bool, status: str = OPTIMAL, message: str = "") -> Design:
     """A :class:`Design` for the static gain ``u = K x``, scored exactly.
 
     A polished gain whose masked gradient is not below :data:`GRAD_RTOL` times its
@@ -86,13 +87,13 @@ def gain_design(instance, method: str, params: dict, K, *, seconds: float, extra
     links, self_loops = count_links(instance.node_support(K))
     extras = {**extras, "spectral_radius": radius}
     if not radius < 1.0:
-        return Design.failure(method, params, "diverged",
+        return Design.failure(method, params, DIVERGED,
                               f"gain does not stabilize (spectral radius {radius:.6g}); {message}".rstrip("; "),
                               info_model="instantaneous", seconds=seconds, links=links,
                               self_loops=self_loops, extras=extras)
     cost = static_gain_cost(instance, K)
-    if polished and status == "optimal" and not extras.get("grad_norm", 0.0) < GRAD_RTOL * cost:
-        status = "inaccurate"
+    if polished and status == OPTIMAL and not extras.get("grad_norm", 0.0) < GRAD_RTOL * cost:
+        status = INACCURATE
         message = (f"{message}; " if message else "") + (
             f"polishing stopped at masked gradient norm {extras['grad_norm']:.3g} "
             f"(> {GRAD_RTOL:g} x cost): {extras.get('polish_message', '')}")
@@ -144,7 +145,7 @@ def with_diagonal_end(designs: list, method: str, base: dict, decentral: "Decent
     γ → ∞ limit is just as infeasible.
     """
     diagonal = decentral.usable()
-    if diagonal is None or not any(d.status in ("optimal", "inaccurate") for d in designs):
+    if diagonal is None or not any(d.status in USABLE for d in designs):
         return designs
     params = {**base, "gamma": float("inf")}
     return designs + [as_path_point(diagonal, method, params, {"solver": "decentralized", "decentralized": True})]

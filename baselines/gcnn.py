@@ -49,6 +49,7 @@ from codesign.design import Design, count_links
 from codesign.instances import node_ranks, node_width
 from codesign.evaluation import simulate, simulate_to_precision, spectral_radius, validation_set
 from codesign.methods import Above, AtLeast, AtMost, method
+from codesign.status import DIVERGED, OPTIMAL
 from codesign._lazy import lazy_import
 from codesign.training import DTYPES, BatchedAdam, no_grad, torch_dtype
 
@@ -580,7 +581,7 @@ def _train(members, steps, batch, dtype, curve_every, curve_size, layout=None):
     costs = torch.stack(costs_rec).numpy()
     return [
         dict(H=H[m].numpy().astype(float), w=w[m].numpy().astype(float),
-             S=S[m].numpy().astype(float), ok=bool(alive[m]), diverged_at=diverged_at[m],
+             S=S[m].numpy().astype(float), diverged_at=diverged_at[m],
              curve={"step": list(steps_rec), "cost": [float(c) for c in costs[:, m]]})
         for m in range(M)
     ]
@@ -597,14 +598,14 @@ def _controller(instance, r) -> GCNNController:
 
 
 def _finish(job: _GJob, results, seconds) -> Design:
-    finals = [r["curve"]["cost"][-1] if r["ok"] else np.inf for r in results]
+    finals = [r["curve"]["cost"][-1] if r["diverged_at"] is None else np.inf for r in results]
     finals = [c if np.isfinite(c) else np.inf for c in finals]
     extras = {"ensemble_curve_costs": [float(c) for c in finals],
-              "diverged_members": sum(not r["ok"] for r in results)}
+              "diverged_members": sum(r["diverged_at"] is not None for r in results)}
     links, self_loops = count_links(job.instance.comm_adj)
     best = int(np.argmin(finals))
     if not np.isfinite(finals[best]):
-        return Design.failure("gcnn", job.params, "diverged", "every ensemble member diverged",
+        return Design.failure("gcnn", job.params, DIVERGED, "every ensemble member diverged",
                               info_model="instantaneous", seconds=seconds, links=links,
                               self_loops=self_loops, extras=extras)
     r = results[best]
@@ -622,11 +623,11 @@ def _finish(job: _GJob, results, seconds) -> Design:
     rollout = simulate_to_precision(job.instance, controller)
     extras.update(rollout.summary())
     if not rollout.bounded:
-        return Design.failure("gcnn", job.params, "diverged", rollout.divergence or "validation rollout unbounded",
+        return Design.failure("gcnn", job.params, DIVERGED, rollout.divergence or "validation rollout unbounded",
                               info_model="instantaneous", seconds=seconds, links=links,
                               self_loops=self_loops, extras=extras)
     return Design(method="gcnn", params=job.params, controller=controller, cost=rollout.cost, links=links,
-                  self_loops=self_loops, info_model="instantaneous", status="optimal",
+                  self_loops=self_loops, info_model="instantaneous", status=OPTIMAL,
                   message="" if not extras["diverged_members"] else
                   f"{extras['diverged_members']} of {len(results)} ensemble members diverged",
                   seconds=seconds, cost_stderr=rollout.stderr, cost_kind="simulated", extras=extras)

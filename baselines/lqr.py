@@ -11,6 +11,7 @@ from codesign.design import Design, count_links
 from codesign.evaluation import spectral_radius, static_gain_cost
 from codesign.instances import check_instance
 from codesign.methods import method
+from codesign.status import FAILED, INACCURATE, OPTIMAL
 
 from ._common import Timer
 from .polish import GRAD_RTOL, polish_gain
@@ -84,11 +85,11 @@ def decentralized(instance, *, start: Literal["lqr_diagonal", "zero"] = "lqr_dia
     links, self_loops = count_links(instance.node_support(result.K))
     extras = {"spectral_radius": radius, "grad_norm": result.grad_norm, "iterations": result.iterations}
     if not np.isfinite(result.cost):
-        return Design.failure("decentralized", params, "failed", f"optimizer diverged: {result.message}",
+        return Design.failure("decentralized", params, FAILED, f"optimizer diverged: {result.message}",
                               info_model="none", seconds=timer.seconds, extras=extras)
-    status, message = "optimal", ""
+    status, message = OPTIMAL, ""
     if not result.grad_norm < GRAD_RTOL * result.cost:
-        status = "inaccurate"
+        status = INACCURATE
         message = (f"L-BFGS stopped at gradient norm {result.grad_norm:.3g} (> {GRAD_RTOL:g} x cost): "
                    f"{result.message}")
     return Design(

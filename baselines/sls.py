@@ -32,10 +32,12 @@ from typing import Annotated
 import numpy as np
 
 from codesign.controllers import register_controller
-from codesign.design import INACCURATE_RTOL, Design, count_links, solver_status, vet_solver_cost
+from codesign.design import Design, count_links
 from codesign.evaluation import impulse_responses, response_cost
 from codesign.instances import hop_distances
 from codesign.methods import Above, AtLeast, Matches, NotEmpty, method
+from codesign.status import (FAILED, INACCURATE, INACCURATE_RTOL, INFEASIBLE, OPTIMAL, USABLE, solver_status,
+                             vet_solver_cost)
 
 from ._common import Timer
 from .qi import _check_speed, is_quadratically_invariant
@@ -229,13 +231,13 @@ def _solve_qp(instance, dist, T, *, speed, act_delay, fir):
         # The SciPy canonicalization backend compiles one big sparse product fastest.
         problem.solve(solver=cp.CLARABEL, canon_backend=cp.SCIPY_CANON_BACKEND)
     except cp.error.SolverError as exc:
-        info.update(solver_status="solver_error", error=str(exc))
+        info.update(solver_status=cp.SOLVER_ERROR, error=str(exc))
         return None, None, info
     info["solver_status"] = problem.status
     stats = problem.solver_stats
     info["solve_seconds"] = float(stats.solve_time) if stats and stats.solve_time is not None else float("nan")
     info["iterations"] = int(stats.num_iters) if stats and stats.num_iters is not None else -1
-    if solver_status(problem.status) not in ("optimal", "inaccurate") or z.value is None:
+    if solver_status(problem.status) not in USABLE or z.value is None:
         return None, None, info
     value = np.zeros(keep.size)
     value[keep] = z.value
@@ -353,14 +355,14 @@ def sls(
         return Design.failure("sls", params, kind, message, info_model="delayed", seconds=timer.seconds,
                               links=links, self_loops=self_loops, extras=extras)
 
-    if status == "infeasible":
+    if status == INFEASIBLE:
         why = f"support constraints on graph {name!r} at speed {speed:g} cannot be met ({raw})"
         why += f"; {qi.reason}" if not qi.qi else "; the graph is QI: the FIR length or horizon is too short"
-        return fail("infeasible", why)
+        return fail(INFEASIBLE, why)
     if X is None:
-        return fail("failed", f"solver status {raw!r}" + (f": {info['error']}" if "error" in info else ""))
+        return fail(FAILED, f"solver status {raw!r}" + (f": {info['error']}" if "error" in info else ""))
     if not np.isfinite(info["objective"]) or info["objective"] > _ABSURD_OBJECTIVE:
-        return fail("failed", f"solver said {raw} with an absurd normalized objective {info['objective']:.3g}")
+        return fail(FAILED, f"solver said {raw} with an absurd normalized objective {info['objective']:.3g}")
 
     controller = SLSController(X, U)
     cost = response_cost(instance, *controller.closed_loop_responses(instance))
@@ -368,7 +370,7 @@ def sls(
     if (fir is None and T == instance.horizon) or (fir is not None and fir <= instance.horizon):
         # Then the QP objective is exactly the benchmark cost of the designed maps.
         realized = cost
-    elif status == "inaccurate":
+    elif status == INACCURATE:
         # The benchmark cost is over another horizon; an inaccurate solve (solvers report
         # them with objectives of 1e29 on infeasible supports) is checked on its own
         # horizon instead. Optimal solves are trusted there, as they always were.
@@ -377,14 +379,14 @@ def sls(
         realized = None
     if realized is not None:
         extras["realized_objective_gap"] = abs(realized - info["objective"]) / max(1.0, abs(realized))
-        rtol = _REALIZATION_RTOL if status == "optimal" else INACCURATE_RTOL
+        rtol = _REALIZATION_RTOL if status == OPTIMAL else INACCURATE_RTOL
         status, why = vet_solver_cost(status, info["objective"], realized, rtol=rtol)
-        if status == "failed":
-            return fail("failed", f"solver said {raw} but, re-evaluated on the realized closed loop, {why} "
+        if status == FAILED:
+            return fail(FAILED, f"solver said {raw} but, re-evaluated on the realized closed loop, {why} "
                                   f"(dynamics residual {info['residual']:.2e})")
     if not np.isfinite(cost):
-        return fail("failed", f"realized closed loop has non-finite cost {cost}")
-    message = "" if status == "optimal" else (
+        return fail(FAILED, f"realized closed loop has non-finite cost {cost}")
+    message = "" if status == OPTIMAL else (
         f"solver status {raw}; the realized closed loop agrees with its objective "
         f"(relative gap {extras['realized_objective_gap']:.1e})")
     return Design(

@@ -38,6 +38,7 @@ import numpy as np
 from codesign.design import Design
 from codesign.evaluation import spectral_radius
 from codesign.methods import Above, AtLeast, NotEmpty, method
+from codesign.status import DIVERGED, USABLE
 
 from ._common import Timer
 from ._sparse import DecentralizedCache, as_path_point, check_gammas, design_on_pattern, with_diagonal_end
@@ -304,7 +305,7 @@ def sparse_admm(
                 why = design.message
             else:
                 why = "the sparse gain G found by ADMM does not stabilize"
-            if design is not None and design.status in ("optimal", "inaccurate"):
+            if design is not None and design.status in USABLE:
                 previous = (design, point, G.copy(), Lam.copy(), W.copy())
             elif previous is not None:
                 # Keep the previous γ's solution and continue the path from it.
@@ -313,7 +314,7 @@ def sparse_admm(
                                        f"kept the previous gamma's gain: {why}")
             else:
                 point, G, Lam = start_point, start_point.K.copy(), np.zeros((m, n))
-                design = Design.failure("sparse_admm", params, "diverged", why, info_model="instantaneous",
+                design = Design.failure("sparse_admm", params, DIVERGED, why, info_model="instantaneous",
                                         extras=extras)
         designs.append(replace(design, seconds=float(timer.seconds)))
     return with_diagonal_end(designs, "sparse_admm", base, decentral) if diagonal_end else designs

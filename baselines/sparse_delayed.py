@@ -92,6 +92,7 @@ from codesign.controllers import register_controller
 from codesign.design import Design, count_links
 from codesign.evaluation import exact_cost, impulse_responses, spectral_radius
 from codesign.methods import Above, AtLeast, NotEmpty, method
+from codesign.status import DIVERGED, INACCURATE, OPTIMAL, USABLE
 
 from ._common import Timer
 from ._sparse import GRAD_RTOL, DecentralizedCache, check_gammas
@@ -777,7 +778,7 @@ def _gain_design(instance, params: dict, local, K_delayed, *, extras: dict, free
     extras = {**extras, "spectral_radius": radius}
     if not radius < 1.0:
         note = f"the delayed gain does not stabilize (spectral radius of the augmented closed loop {radius:.6g})"
-        return Design.failure(METHOD, params, "diverged", f"{note}; {message}" if message else note,
+        return Design.failure(METHOD, params, DIVERGED, f"{note}; {message}" if message else note,
                               info_model=INFO_MODEL, seconds=seconds, links=links, self_loops=self_loops,
                               extras=extras)
     controller = nodes.controller(K_local, K_delayed)
@@ -786,9 +787,9 @@ def _gain_design(instance, params: dict, local, K_delayed, *, extras: dict, free
     cost = exact_cost(instance, controller)
     rel = grad_norm / recursion_cost
     extras = {**extras, "grad_norm": grad_norm, "masked_grad_rel": rel}
-    status = "optimal"
+    status = OPTIMAL
     if not rel < GRAD_RTOL:
-        status = "inaccurate"
+        status = INACCURATE
         note = (f"polishing stopped at masked gradient {rel:.3g} x cost (> {GRAD_RTOL:g}): "
                 f"{extras.get('polish_message', '')}")
         message = f"{message}; {note}" if message else note
@@ -943,7 +944,7 @@ def sparse_delayed(
                     local, K_delayed = polished.local, polished.K_delayed
                 design = _gain_design(instance, params, polished.local, polished.K_delayed, extras=extras,
                                       free=free)
-            if design.status in ("optimal", "inaccurate"):
+            if design.status in USABLE:
                 restart = (local, K_delayed, W)
             else:
                 local, K_delayed, W = restart
@@ -955,7 +956,7 @@ def sparse_delayed(
             designs.append(replace(end, seconds=float(diagonal.seconds)))
         else:
             designs.append(Design.failure(
-                METHOD, params, "diverged",
+                METHOD, params, DIVERGED,
                 f"no stabilizing diagonal gain on this instance ({diagonal.message or diagonal.status})",
                 info_model=INFO_MODEL, extras={"solver": "decentralized", "decentralized": True}))
     return designs

@@ -76,8 +76,9 @@ from typing import Annotated, Literal
 
 import numpy as np
 
-from codesign.design import Design, solver_status
+from codesign.design import Design
 from codesign.methods import Above, AtLeast, Below, NotEmpty, method
+from codesign.status import FAILED, INACCURATE, OPTIMAL, USABLE, solver_status
 
 from ._common import Timer
 from ._sparse import DecentralizedCache, check_gammas, design_on_pattern, with_diagonal_end
@@ -259,31 +260,31 @@ class SparseSDP:
                 else:
                     self._solve_clarabel()
         except cp.error.SolverError as exc:
-            return {**out, "status": "failed", "cvxpy_status": "solver_error",
+            return {**out, "status": FAILED, "cvxpy_status": cp.SOLVER_ERROR,
                     "message": f"{self.solver_name} failed: {exc}"}
         raw = str(self.problem.status)
         stats = self.problem.solver_stats
         out.update(cvxpy_status=raw, status=solver_status(raw),
                    solve_time=float(stats.solve_time or float("nan")), iterations=int(stats.num_iters or -1))
-        if raw != "optimal":
+        if raw != cp.OPTIMAL:
             out["message"] = f"SDP solver status {raw}"
-        if self.solver == "scs" and out["iterations"] >= self.max_iter and raw != "optimal_inaccurate":
+        if self.solver == "scs" and out["iterations"] >= self.max_iter and raw != cp.OPTIMAL_INACCURATE:
             # SCS labels its last iterate at the limit (even "infeasible_inaccurate" after two
             # iterations): that certifies nothing, so it is a failure, like Clarabel's user_limit.
-            out.update(status="failed", message=f"SCS stopped at its iteration limit ({self.max_iter}) "
+            out.update(status=FAILED, message=f"SCS stopped at its iteration limit ({self.max_iter}) "
                                                 f"with status {raw}; pass a larger max_iter")
-        if out["status"] in ("optimal", "inaccurate") and self.blocks and self.Y.value is not None:
+        if out["status"] in USABLE and self.blocks and self.Y.value is not None:
             try:
                 out.update(self._block_solution())
             except (np.linalg.LinAlgError, FloatingPointError, ValueError, TypeError) as exc:
-                out.update(status="failed", message=f"SDP solver status {raw}: no usable gain ({exc})")
-        elif out["status"] in ("optimal", "inaccurate") and self.Y.value is not None:
+                out.update(status=FAILED, message=f"SDP solver status {raw}: no usable gain ({exc})")
+        elif out["status"] in USABLE and self.Y.value is not None:
             x, Y = np.array(self.x.value), np.array(self.Y.value)
             RY = np.linalg.cholesky(self.instance.R).T @ Y
             bound = float(np.diag(self.instance.Q) @ x + np.sum(RY**2 / x[None, :]))
             out.update(x=x, Y=Y, K=-Y / x[None, :], bound=bound)
-        elif out["status"] in ("optimal", "inaccurate"):
-            out.update(status="failed", message=f"SDP solver status {raw} without a solution")
+        elif out["status"] in USABLE:
+            out.update(status=FAILED, message=f"SDP solver status {raw} without a solution")
         return out
 
     @property
@@ -371,7 +372,7 @@ class SparseSDP:
         if scale is None:
             scale = 1e3 if self.blocks else 1e6
         result = self.solve(scale)
-        if result["status"] != "optimal":
+        if result["status"] != OPTIMAL:
             raise RuntimeError(f"could not solve the diagonal SDP: {result['message']}")
         top = self.diagonal_certificate(result)
         if self.blocks and not top < scale:
@@ -474,7 +475,7 @@ def sparse_sdp(
     if instance.n > max_states:
         why = (f"the l1 SDP is not run on {instance.n} states (max_states = {max_states}): "
                f"{_SIZE_GUARD_REASON[solver]}; pass max_states to run it anyway")
-        designs = [Design.failure("sparse_sdp", {"gamma": float(g), **base}, "failed", why,
+        designs = [Design.failure("sparse_sdp", {"gamma": float(g), **base}, FAILED, why,
                                   info_model="instantaneous", extras={"solver": solver.upper(), "size_guard": True})
                    for g in gammas]
         return with_diagonal_end(designs, "sparse_sdp", base, decentral) if diagonal_end else designs
@@ -503,9 +504,9 @@ def sparse_sdp(
                 # (X is diagonal, or block-diagonal by node) and the inaccurate solve only seeds
                 # a pattern whose gain is polished and scored exactly; a gain that does not
                 # stabilize is "diverged".
-                if result["status"] == "inaccurate" and design.status == "optimal":
-                    design = replace(design, status="inaccurate", message=result["message"])
-                if screen and result["status"] == "optimal" and design.links == 0:
+                if result["status"] == INACCURATE and design.status == OPTIMAL:
+                    design = replace(design, status=INACCURATE, message=result["message"])
+                if screen and result["status"] == OPTIMAL and design.links == 0:
                     bound = sdp.diagonal_certificate(result)
                     design = replace(design, extras={**design.extras, "diagonal_certificate": bound})
                     if np.isfinite(bound):

@@ -19,6 +19,7 @@ from .design import (
     solver_status,
     vet_solver_cost,
 )
+from .status import NO_DESIGN, USABLE
 from .evaluation import (
     Rollout,
     compare_exact_and_simulated,
@@ -46,6 +47,8 @@ __all__ = [
     "hop_distances",
     "Design",
     "STATUSES",
+    "USABLE",
+    "NO_DESIGN",
     "SOLVER_STATUS",
     "INACCURATE_RTOL",
     "solver_status",

@@ -1,4 +1,9 @@
-"""The result type every method returns, and its status taxonomy."""
+"""The result type every method returns.
+
+Its status words, their groups and the solver-status policy live in
+:mod:`codesign.status`; they are re-exported here, where they were first
+defined, so that ``from codesign.design import STATUSES`` keeps working.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +12,17 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from .status import (
+    INACCURATE_RTOL,
+    NO_DESIGN,
+    OPTIMAL,
+    SOLVER_STATUS,
+    STATUSES,
+    USABLE,
+    solver_status,
+    vet_solver_cost,
+)
 
 __all__ = [
     "Design",
@@ -18,69 +34,6 @@ __all__ = [
     "vet_solver_cost",
     "INACCURATE_RTOL",
 ]
-
-#: Every status a design can carry. Only ``optimal`` (and, flagged, ``inaccurate``)
-#: designs carry a cost; the others carry NaN and a message saying why.
-STATUSES = ("optimal", "inaccurate", "infeasible", "diverged", "failed")
-
-#: The one policy from a convex solver's status (cvxpy's names) to a design status;
-#: any other status (``user_limit``, ``solver_error``, ``unbounded``, ...) is ``failed``.
-SOLVER_STATUS = {
-    "optimal": "optimal",
-    "optimal_inaccurate": "inaccurate",
-    "infeasible": "infeasible",
-    "infeasible_inaccurate": "infeasible",
-}
-
-#: Relative gap allowed between an ``inaccurate`` solve's objective and the exact cost
-#: of its design. Clarabel reports ``optimal_inaccurate`` when it meets its reduced
-#: tolerances (5e-5 relative duality gap, 1e-4 feasibility) but not the full ones, so an
-#: honest inaccurate solution agrees to about 1e-4; 1e-3 leaves room for that and
-#: still rejects the solves that stop far away (objectives off by orders of magnitude,
-#: e.g. 1e29 on infeasible supports).
-INACCURATE_RTOL = 1e-3
-
-
-def solver_status(raw) -> str:
-    """Design status for a solver's status string (see :data:`SOLVER_STATUS`); unknown -> ``"failed"``."""
-    return SOLVER_STATUS.get(str(raw), "failed")
-
-
-def vet_solver_cost(status: str, objective: float, cost: float, *, rtol: float = INACCURATE_RTOL) -> tuple[str, str]:
-    """Keep a solve's status only when the exact cost of its design backs the solver's objective.
-
-    Parameters
-    ----------
-    status : str
-        The design status from :func:`solver_status`; only ``optimal`` and
-        ``inaccurate`` are checked, others are returned as they are.
-    objective : float
-        The solver's objective, in the same (normalized) units as ``cost``.
-    cost : float
-        The design's cost re-evaluated in closed form (from the realized
-        controller, not from the solver's variables).
-    rtol : float
-        Largest relative gap ``|cost - objective| / max(1, |cost|)`` (normalized
-        costs are >= 1). The default suits ``inaccurate`` solves; a method passes
-        its own, tighter one for ``optimal`` solves.
-
-    Returns
-    -------
-    (str, str)
-        ``(status, "")`` when the cost backs the objective, else ``("failed", why)``.
-    """
-    if status not in ("optimal", "inaccurate"):
-        return status, ""
-    if not np.isfinite(cost):
-        return "failed", f"the design's exact cost is {cost}"
-    if not np.isfinite(objective):
-        return "failed", f"the solver's objective is {objective}"
-    gap = abs(cost - objective) / max(1.0, abs(cost))
-    if gap > rtol:
-        return "failed", (f"the design's exact cost {cost:.6g} disagrees with the solver's objective "
-                          f"{objective:.6g} (relative gap {gap:.2e} > {rtol:g})")
-    return status, ""
-
 
 #: How information travels in a design: ``instantaneous`` (links deliver the current
 #: state with no delay, possibly over many hops), ``delayed`` (one step per hop, as
@@ -138,7 +91,7 @@ class Design:
     links: int
     self_loops: int
     info_model: str
-    status: str = "optimal"
+    status: str = OPTIMAL
     message: str = ""
     seconds: float = 0.0
     cost_stderr: float = 0.0
@@ -150,16 +103,19 @@ class Design:
             raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
         if self.info_model not in INFO_MODELS:
             raise ValueError(f"info_model must be one of {INFO_MODELS}, got {self.info_model!r}")
-        if self.status in ("infeasible", "diverged", "failed") and np.isfinite(self.cost):
+        if self.status in NO_DESIGN and np.isfinite(self.cost):
             # A failed design must never look like a number on a plot.
             object.__setattr__(self, "cost", float("nan"))
-        if self.status in ("optimal", "inaccurate") and not np.isfinite(self.cost):
+        if self.status in USABLE and not np.isfinite(self.cost):
             raise ValueError(f"a design with status {self.status!r} needs a finite cost, got {self.cost}")
 
     @property
     def ok(self) -> bool:
-        """True when the design has a trustworthy cost (status ``optimal``)."""
-        return self.status == "optimal"
+        """True when the design's cost counts: a :data:`~codesign.status.USABLE` status and a finite cost.
+
+        The same meaning as :attr:`compare.records.DesignRecord.ok`.
+        """
+        return self.status in USABLE and bool(np.isfinite(self.cost))
 
     @classmethod
     def failure(

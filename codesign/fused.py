@@ -28,7 +28,7 @@ import functools
 import numba
 import numpy as np
 
-from .training import FUSED_DENSE_NODES, FUSED_DENSE_S, s_supports
+from .engines import FUSED_DENSE_NODES, FUSED_DENSE_S, s_supports
 
 __all__ = ["FusedStack", "DENSE_S", "DENSE_AB"]
 

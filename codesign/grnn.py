@@ -22,6 +22,7 @@ import numpy as np
 
 from .controllers import register_controller
 from .design import Design, count_links
+from .status import DIVERGED, OPTIMAL
 from .instances import node_ranks, node_width
 from .evaluation import (exact_cost, impulse_responses, simulate, simulate_to_precision, spectral_radius,
                          validation_set)
@@ -395,7 +396,7 @@ def _train_groups(specs_by_job: list[list[ModelSpec]], jobs: list[_Job], stack_s
 
 
 def _best(results) -> int | None:
-    costs = [r.final_curve_cost if r.status == "ok" else np.inf for r in results]
+    costs = [r.final_curve_cost if not r.diverged else np.inf for r in results]
     costs = [c if np.isfinite(c) else np.inf for c in costs]
     best = int(np.argmin(costs))
     return None if not np.isfinite(costs[best]) else best
@@ -457,10 +458,10 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
     extras: dict = {
         "variant": job.variant,
         "ensemble_curve_costs": [r.final_curve_cost for r in first],
-        "diverged_members": sum(r.status == "diverged" for r in first),
+        "diverged_members": sum(r.diverged for r in first),
     }
     if chosen is None:
-        return Design.failure(method, job.params, "diverged",
+        return Design.failure(method, job.params, DIVERGED,
                               f"all {len(first)} ensemble members diverged (non-finite loss or gradient)",
                               info_model="delayed", seconds=seconds, extras=extras)
     result = first[chosen]
@@ -471,7 +472,7 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
         best = _best(refined) if refined else None
         extras["refine_curve_costs"] = [r.final_curve_cost for r in refined]
         if best is None:
-            return Design.failure(method, job.params, "diverged", "every refinement run diverged",
+            return Design.failure(method, job.params, DIVERGED, "every refinement run diverged",
                                   info_model="delayed", seconds=seconds, extras=extras)
         result = refined[best]
     linear = job.settings["activation"] == "identity"
@@ -494,7 +495,7 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
         extras["max_state"] = float(long.max_state)
         extras["stability_steps"] = steps
     if not rollout.bounded or not np.isfinite(rollout.cost):
-        return Design.failure(method, job.params, "diverged",
+        return Design.failure(method, job.params, DIVERGED,
                               rollout.divergence or "the trained controller's validation rollout is unbounded",
                               info_model="delayed", seconds=seconds, links=links, self_loops=self_loops,
                               extras=extras)
@@ -509,7 +510,7 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
         links=links,
         self_loops=self_loops,
         info_model="delayed",
-        status="optimal",
+        status=OPTIMAL,
         message=message,
         seconds=seconds,
         cost_stderr=rollout.stderr,
@@ -524,12 +525,12 @@ def _finish_linear(job: _Job, controller, first, links, self_loops, seconds, ext
     cost = exact_cost(job.instance, controller)
     extras["bounded"] = bool(extras["spectral_radius"] < 1.0)
     if not np.isfinite(cost):
-        return Design.failure(method, job.params, "diverged", "the trained linear GRNN's exact cost is not finite",
+        return Design.failure(method, job.params, DIVERGED, "the trained linear GRNN's exact cost is not finite",
                               info_model="delayed", seconds=seconds, links=links, self_loops=self_loops,
                               extras=extras)
     diverged = extras["diverged_members"]
     return Design(method=method, params=job.params, controller=controller, cost=cost, links=links,
-                  self_loops=self_loops, info_model="delayed", status="optimal",
+                  self_loops=self_loops, info_model="delayed", status=OPTIMAL,
                   message=f"{diverged} of {len(first)} ensemble members diverged" if diverged else "",
                   seconds=seconds, cost_stderr=0.0, cost_kind="exact", extras=extras)
 

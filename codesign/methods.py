@@ -46,6 +46,7 @@ from typing import Any, Callable
 
 from .design import Design
 from .instances import check_instance
+from .status import FAILED
 
 __all__ = [
     "Method",
@@ -309,7 +310,7 @@ class Method:
         """The recorded failure for an instance this method cannot handle, or None."""
         if self.node_blocks or getattr(instance, "scalar_nodes", True):
             return None
-        return [Design.failure(self.name, dict(params), "failed",
+        return [Design.failure(self.name, dict(params), FAILED,
                                f"method {self.name!r} does not handle nodes with several states or inputs "
                                f"({instance.n} states and {instance.m} inputs on {instance.nodes} nodes)")]
 

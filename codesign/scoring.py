@@ -16,6 +16,7 @@ import numpy as np
 from .design import INFO_MODELS, Design, count_links
 from .evaluation import (MAX_VALIDATION_SIZE, PRECISION_TARGET, VALIDATION_SIZE, exact_cost, simulate,
                          simulate_to_precision, validation_set)
+from .status import DIVERGED, USABLE
 
 __all__ = ["score", "evaluate"]
 
@@ -95,7 +96,7 @@ def score(
     exact = exact_cost(instance, controller)
     if exact is not None:
         if not np.isfinite(exact):
-            return replace(design, status="diverged", cost=float("nan"), cost_stderr=float("nan"),
+            return replace(design, status=DIVERGED, cost=float("nan"), cost_stderr=float("nan"),
                            message=message or "the exact cost is not finite")
         return replace(design, cost=exact, cost_stderr=0.0, cost_kind="exact")
     return _simulated(instance, replace(design, cost_kind="simulated"), validation_size)
@@ -108,7 +109,7 @@ def _simulated(instance, design: Design, validation_size: int) -> Design:
     extras = dict(design.extras, **rollout.summary())
     if not rollout.bounded or not np.isfinite(rollout.cost):
         message = rollout.divergence or f"the controller's {validation_size}-draw validation rollout is unbounded"
-        return Design.failure(design.method, design.params, "diverged", message, info_model=design.info_model,
+        return Design.failure(design.method, design.params, DIVERGED, message, info_model=design.info_model,
                               seconds=design.seconds, links=design.links, self_loops=design.self_loops,
                               extras=extras)
     return replace(design, cost=rollout.cost, cost_stderr=rollout.stderr, extras=extras)
@@ -147,11 +148,11 @@ def evaluate(instance, design: Design, *, validation_size: int = VALIDATION_SIZE
     process-noise robustness score in its extras (``noise_cost``,
     ``noise_cost_stderr``): exact for linear controllers, simulated otherwise.
     """
-    if design.controller is None or design.status not in ("optimal", "inaccurate"):
+    if design.controller is None or design.status not in USABLE:
         return design
     if design.cost_kind == "simulated" and not _scored_to_precision(design.extras, validation_size):
         design = _simulated(instance, design, validation_size)
-        if design.status == "diverged":
+        if design.status == DIVERGED:
             return design
     if noise_std > 0:
         cost = exact_cost(instance, design.controller, noise_std=noise_std)

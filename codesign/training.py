@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._lazy import lazy_import
+from .engines import ENGINES, FUSED_DENSE_NODES, FUSED_DENSE_S, resolve_engine, s_supports  # noqa: F401
 
 torch = lazy_import("torch")
 #: Imported only when the fused engine runs (it loads numba), yet part of this code's fingerprint.
@@ -58,47 +59,9 @@ __all__ = [
 DTYPES = ("float32", "float64")
 #: The GRNN's activation σ: the paper's tanh, or the identity (a linear dynamic controller).
 ACTIVATIONS = ("tanh", "identity")
-#: How a stack's loss and gradient are computed: one torch call per product and time step
-#: (any node layout), or one compiled pass per model (:mod:`codesign.fused`, numba; one state
-#: and one input per node); "auto" takes "fused" where it applies and is faster (resolve_engine).
-ENGINES = ("auto", "torch", "fused")
-
-
 def _check_activation(activation: str) -> None:
     if activation not in ACTIVATIONS:
         raise ValueError(f"activation must be one of {ACTIVATIONS}, got {activation!r}")
-
-
-#: The fused engine multiplies by S dense where its support is more than this full, and only
-#: up to this many nodes (its loops over nodes unroll); beyond, a full S makes it slower than
-#: torch's batched products (docs/performance.md), so "auto" leaves such stacks to torch.
-FUSED_DENSE_S, FUSED_DENSE_NODES = 0.5, 32
-
-
-def s_supports(S0: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Where each model's S can be nonzero, (M, N, N): its mask, or the nonzeros of S0 if S is frozen."""
-    trainable = mask.any(axis=(1, 2))
-    return np.where(trainable[:, None, None], mask, S0 != 0)
-
-
-def resolve_engine(engine: str, states_per_node: int = 1, inputs_per_node: int = 1,
-                   nodes: int = 0, support_density: float = 0.0) -> str:
-    """The engine that runs: ``engine`` itself, or for "auto" the faster one that applies.
-
-    "auto" takes "fused" with one state and one input per node, unless the stack has
-    more than ``FUSED_DENSE_NODES`` nodes and an S support (``support_density``, its
-    largest fraction of nonzeros) more than ``FUSED_DENSE_S`` full.
-    """
-    if engine not in ENGINES:
-        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
-    scalar = states_per_node == inputs_per_node == 1
-    if engine == "fused" and not scalar:
-        raise ValueError(f"engine 'fused' needs one state and one input per node, this stack has "
-                         f"{states_per_node} and {inputs_per_node}; use engine 'torch' or 'auto'")
-    if engine == "auto":
-        dense_and_large = nodes > FUSED_DENSE_NODES and support_density > FUSED_DENSE_S
-        return "fused" if scalar and not dense_and_large else "torch"
-    return engine
 
 
 def torch_dtype(name: str):
@@ -200,11 +163,19 @@ class TrainResult:
     F: np.ndarray
     W: np.ndarray
     G: np.ndarray
-    status: str  # "ok" or "diverged"
-    diverged_at: int | None
+    diverged_at: int | None  # the step whose loss or gradient was not finite; None if it trained to the end
     curve_step: list = field(default_factory=list)
     curve_cost: list = field(default_factory=list)
     final_loss: float = float("nan")
+
+    @property
+    def diverged(self) -> bool:
+        """Whether training froze this model at a non-finite loss or gradient.
+
+        A training outcome, not a design status: the method decides what a
+        diverged member means for its design.
+        """
+        return self.diverged_at is not None
 
     @property
     def final_curve_cost(self) -> float:
@@ -670,14 +641,12 @@ def train_stack(
     costs = torch.stack(curve_costs).numpy()  # (points, M)
     results = []
     for m in range(M):
-        status = "ok" if bool(alive[m]) else "diverged"
         results.append(
             TrainResult(
                 S=S[m].numpy().astype(float),
                 F=F[m].numpy().astype(float),
                 W=W[m].numpy().astype(float),
                 G=G[m].numpy().astype(float),
-                status=status,
                 diverged_at=diverged_at[m],
                 curve_step=list(curve_steps),
                 curve_cost=[float(c) for c in costs[:, m]],

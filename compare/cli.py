@@ -20,12 +20,12 @@ __all__ = ["main"]
 #: Approximate wall time of ``compare run PRESET`` on 2 cores (2 workers), report included.
 #: A preset missing here is listed as "not measured".
 PRESET_TIMES = {
-    "quick": "~1 min (61 s measured)",
+    "quick": "~1 min (60 s measured)",
     "baselines-small": "~20 s (16 s measured)",
     "sls-small": "~15 s (15 s measured)",
     "table1-small": "~40 s (38 s measured)",
     "table1": "~11 min (639 s measured)",
-    "tradeoff": "~55 min (3057 s measured before GRNN-Dense was added; its runs take ~170 s more)",
+    "tradeoff": "~42 min (2507 s measured)",
     "systems": "~3 min (195 s measured)",
     "scale": "~23 min (1355 s measured)",
 }

@@ -1,8 +1,7 @@
 """Stored designs as one analysis table: a row per design, settings as columns.
 
 :func:`designs_frame` turns :meth:`Store.records` into a pandas DataFrame;
-:meth:`Store.to_pandas`, :meth:`Records.to_pandas <compare.records.Records.to_pandas>`
-and ``compare export`` all use it. Columns, in order:
+:meth:`Store.to_pandas` and ``compare export`` use it. Columns, in order:
 
 * ``experiment`` (the experiment that computed the run), ``experiments`` (the
   experiments whose latest ``compare run`` names it, comma-separated),

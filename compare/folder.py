@@ -16,8 +16,10 @@ from is written into its folder as plain files, losslessly:
     as ``curve`` and ``l1_curve``), long format: ``run_key, idx, name, step, value``.
 ``report.json``
     The store's meta, the experiments' members, the count of superseded runs, the
-    software versions, the supports of the controllers the topology figure draws,
-    the styles each figure drew, and what a CSV cell cannot hold: the other non-scalar extras (lists, nested
+    software versions, the supports of the controllers the topology figure draws
+    and the drawing of their instance (its graphs and node colours, as the runner
+    stored them with its facts), the styles each figure drew, and what a CSV cell
+    cannot hold: the other non-scalar extras (lists, nested
     dicts, None) and which text fields are None rather than empty.
 
 :func:`write_folder` writes them (deterministically: writing the same data twice
@@ -38,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from .records import Records, as_records, canonical_key
+from .drawing import InstanceDrawing
 
 __all__ = ["write_folder", "read_folder", "FolderData", "FolderError", "StoredSupport", "topology_supports",
            "FOLDER_FILES", "FOLDER_FORMAT"]
@@ -173,7 +176,9 @@ def write_folder(records, out, *, meta: Mapping, members: Mapping, superseded: i
     supports : Mapping, optional
         ``(run_key, idx) -> (n, n) array`` (nonzero = link), or None for a design
         without one: the controllers the topology figure draws
-        (:func:`topology_supports`).
+        (:func:`topology_supports`). The drawing of these designs' instance
+        (:attr:`compare.records.InstanceRecord.drawing`) is kept with them, so that
+        the folder draws the topology figure again without a store.
     figures : Mapping, optional
         Figure stem -> label -> the (colour, marker) pairs it drew (JSON values), kept
         so that tests and readers can check the styles without parsing images.
@@ -198,6 +203,10 @@ def write_folder(records, out, *, meta: Mapping, members: Mapping, superseded: i
         nulls = [name for name in _TEXT if getattr(r, name) is None]
         if nulls:
             null_text[key] = nulls
+    drawn = set(supports or {})
+    # getattr: as in compare.report_sections._drawing_of, for a run whose records module predates drawings.
+    drawings = {r.instance.key: r.instance.drawing.to_facts() for r in records
+                if (r.run_key, r.idx) in drawn and getattr(r.instance, "drawing", None) is not None}
     document = {
         "format": FOLDER_FORMAT,
         "meta": dict(meta),
@@ -210,6 +219,8 @@ def write_folder(records, out, *, meta: Mapping, members: Mapping, superseded: i
         "other_extras": other_extras,
         "null_text": null_text,
     }
+    if drawings:  # a folder without a topology figure is written as before drawings were kept
+        document["drawings"] = drawings
     files["json"].write_text(json.dumps(document, sort_keys=True, indent=1, ensure_ascii=False) + "\n",
                              encoding="utf-8")
     return files
@@ -443,11 +454,18 @@ def _read_report(path: Path, designs: dict) -> dict:
                                               for p in software),
            path, "software must be a list of [package, version] string pairs")
     software = dict(software)
-    sections = {k: document.get(k, {}) for k in ("supports", "other_extras", "null_text", "figures")}
+    sections = {k: document.get(k, {}) for k in ("supports", "drawings", "other_extras", "null_text", "figures")}
     for name, section in sections.items():
         _check(isinstance(section, dict), path, f"{name} must be an object")
     supports = {_design_of(k, designs, path, "supports"): _support(v, path, repr(k))
                 for k, v in sections["supports"].items()}
+    instances = {canonical_key(row["instance"]) for row in designs.values()}
+    for key, entry in sections["drawings"].items():
+        _check(key in instances, path, f"drawings: {key!r} is no instance in {RUNS}")
+        try:
+            InstanceDrawing.from_facts(entry)
+        except ValueError as exc:
+            raise FolderError(f"{path}: drawings: {_one_line(exc)}") from None
     for text, extras in sections["other_extras"].items():
         key = _design_of(text, designs, path, "other_extras")
         _check(isinstance(extras, dict), path, f"other_extras: {text!r} must be an object")
@@ -461,7 +479,8 @@ def _read_report(path: Path, designs: dict) -> dict:
             _check(designs[key][name] == "", path, f"null_text: {text!r} says {name} is None, {RUNS} has text")
             designs[key][name] = None
     return {"meta": document["meta"], "members": {k: frozenset(v) for k, v in members.items()},
-            "superseded": superseded, "software": software, "supports": supports, "figures": sections["figures"]}
+            "superseded": superseded, "software": software, "supports": supports, "figures": sections["figures"],
+            "drawings": sections["drawings"]}
 
 
 def read_folder(out) -> FolderData:
@@ -492,5 +511,7 @@ def read_folder(out) -> FolderData:
     rows, facts = _read_runs(out / RUNS)
     designs = {(row["run_key"], row["idx"]): row for row in rows}
     report = _read_report(out / REPORT, designs)
+    for key, drawing in report.pop("drawings").items():  # old folders keep none: their figure is left out
+        facts[key] = {**facts[key], "drawing": drawing}
     _read_curves(out / CURVES, designs)
     return FolderData(records=Records.from_rows(rows, facts), **report)

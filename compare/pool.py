@@ -58,7 +58,7 @@ def _watch_parent(parent_pid: int) -> None:
 
 def _sendable(runs, results) -> list:
     """``results`` with every run whose designs cannot be pickled replaced by a recorded failure."""
-    from .runner import unsendable
+    from .execution import unsendable
 
     out = []
     for run, result in zip(runs, results):
@@ -74,7 +74,7 @@ def _serve(conn, parent_pid: int) -> None:
     """A worker's life: take a task, run it, send back its results; end when the pipe closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _die_with_parent(parent_pid)
-    from .runner import WorkerSetupError, _limit_threads, execute_task
+    from .execution import WorkerSetupError, _limit_threads, execute_task
 
     _limit_threads()
     while True:
@@ -175,7 +175,7 @@ class WorkerPool:
         ends a task (for progress). Raises :class:`compare.runner.WorkerSetupError`
         when a worker cannot load the experiment's methods.
         """
-        from .runner import WorkerSetupError
+        from .execution import WorkerSetupError
 
         queue = deque(tasks)
         while queue or self._busy:
@@ -220,6 +220,8 @@ class WorkerPool:
                         on_finish(runs)
 
     def _give(self, runs, plugins) -> None:
+        while self._idle and not self._idle[-1].process.is_alive():  # died idle (e.g. the OOM killer): not this run's
+            self._idle.pop().stop()
         worker = self._idle.pop() if self._idle else _Worker(self._context)
         self._next_id += 1
         now = time.monotonic()
@@ -251,7 +253,7 @@ class WorkerPool:
     @staticmethod
     def _fail(runs, message: str, seconds: float, queue: deque, record, extras: dict | None = None) -> None:
         """A task that ended its worker or its time: one run is recorded failed; several are retried one by one."""
-        from .runner import failed_run
+        from .execution import failed_run
 
         if len(runs) > 1:
             queue.extendleft([run] for run in reversed(runs))

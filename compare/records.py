@@ -17,10 +17,12 @@ from functools import cached_property
 from types import MappingProxyType
 from typing import Any
 
+from codesign.status import USABLE
+
 __all__ = ["InstanceRecord", "DesignRecord", "Records", "as_records", "canonical_key", "panel_key", "OK_STATUSES"]
 
 #: Statuses of a design whose cost counts.
-OK_STATUSES = ("optimal", "inaccurate")
+OK_STATUSES = USABLE
 
 
 def canonical_key(mapping: Mapping) -> str:
@@ -111,6 +113,10 @@ class InstanceRecord:
     plant_links, comm_links : int or None
         Directed off-diagonal links of the plant and of the communication graph
         (:func:`compare.runner.instance_facts`).
+    drawing : compare.drawing.InstanceDrawing or None
+        What the designed-topology figure draws of the instance (its graphs and
+        node colours); the runner stores it for instances of at most
+        :data:`compare.drawing.DRAWN_NODES_AT_MOST` nodes.
 
     Each fact is None where the store holds none for the instance.
     """
@@ -120,13 +126,23 @@ class InstanceRecord:
     n: int | None = field(default=None, compare=False)
     plant_links: int | None = field(default=None, compare=False)
     comm_links: int | None = field(default=None, compare=False)
+    drawing: Any = field(default=None, compare=False, repr=False)
 
     @classmethod
     def from_spec(cls, spec: Mapping, facts: Mapping | None = None) -> InstanceRecord:
-        """The record of ``spec``, with ``facts`` as the runner stores them (``n``, ``plant_links``, ``comm_links``)."""
+        """The record of ``spec``, with ``facts`` as the runner stores them.
+
+        ``n``, ``plant_links``, ``comm_links`` and ``drawing``
+        (:meth:`compare.drawing.InstanceDrawing.from_facts`; ValueError if malformed).
+        """
         facts = facts or {}
+        drawing = facts.get("drawing")
+        if drawing is not None:
+            from .drawing import InstanceDrawing
+
+            drawing = InstanceDrawing.from_facts(drawing)
         return cls(_frozen(spec), canonical_key(spec), facts.get("n"), facts.get("plant_links"),
-                   facts.get("comm_links"))
+                   facts.get("comm_links"), drawing)
 
     @property
     def family(self) -> str:
@@ -153,7 +169,10 @@ class InstanceRecord:
 
     @property
     def has_facts(self) -> bool:
-        """Whether the store holds every fact about this instance."""
+        """Whether the store holds the counts about this instance (``n``, ``plant_links``, ``comm_links``).
+
+        The ``drawing`` is not among them: it is stored for small instances only.
+        """
         return None not in (self.n, self.plant_links, self.comm_links)
 
 
@@ -312,11 +331,6 @@ class Records(Sequence):
         """(panel, label) -> the designs of that label on that panel."""
         return self.group(lambda r: (r.instance.panel, r.label))
 
-    def to_pandas(self, members: dict | None = None):
-        """The analysis table, one row per design: :func:`compare.export.designs_frame`."""
-        from .export import designs_frame
-
-        return designs_frame(self, members)
 
 
 def as_records(records: Iterable) -> Records:

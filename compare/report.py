@@ -21,6 +21,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from codesign.status import OPTIMAL  # noqa: E402
+
 from .cost_links import Point, aggregate, pareto_front, plot_cost_vs_links, quartiles  # noqa: E402
 from .figures import LINESTYLES, OFF_SCALE, drawn_styles, plot_budget_fronts  # noqa: E402
 from .records import Records, as_records  # noqa: E402
@@ -325,7 +327,7 @@ def _provenance_lines(records: Records, meta: dict, commands, superseded: int, s
     lines += _fingerprint_lines(records, meta)
     lines += ["## Runs by status", "", "| status | designs |", "|---|---:|"]
     lines += [f"| {status} | {count} |" for status, count in sorted(statuses.items())]
-    failures = records.filter(lambda r: r.status != "optimal")
+    failures = records.filter(lambda r: r.status != OPTIMAL)
     if failures:
         lines += ["", f"Non-optimal designs ({min(20, len(failures))} of {len(failures)}):", "",
                   "| instance | method | status | message |", "|---|---|---|---|"]

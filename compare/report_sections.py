@@ -84,20 +84,21 @@ def topology_path(records, meta: dict) -> tuple[list, str | None]:
     return [], None
 
 
-def _instance_to_draw(instance, build_instance):
-    """The instance the topology figure draws, or None: the one figure that needs an instance's matrices.
+def _drawing_of(instance, entries):
+    """What the topology figure draws of ``instance``, or None to leave the figure out.
 
-    The store keeps no matrices, so the instance is built, but only where the runner
-    stored its facts, which it does once it has built the instance itself: an instance
-    that could not be built (or one of a store without facts) is never attempted, and a
-    build that fails all the same leaves the figure out instead of the report.
+    The drawing the runner stored with the instance's facts; nothing is built. None
+    for an instance without one (not built by the runner, more than
+    :data:`compare.topologies.DRAWN_NODES_AT_MOST` nodes, a store or report folder
+    written before drawings were stored) and where a support does not fit its nodes.
     """
-    if not instance.has_facts:
+    # getattr: a `compare run` that started before drawings were stored holds the older InstanceRecord
+    # (its records module loaded then), while this module is imported only when it writes its report.
+    drawing = getattr(instance, "drawing", None)
+    if drawing is None or len(entries) < 2:
         return None
-    try:
-        return build_instance(dict(instance.spec))
-    except Exception:  # a family or file that changed since the run: the report goes on without the figure
-        return None
+    shape = (drawing.nodes, drawing.nodes)
+    return drawing if all(np.shape(support) == shape for *_, support in entries) else None
 
 
 def learning_sections(records: Records, save, styles: dict, load_controller, meta: dict,
@@ -109,7 +110,6 @@ def learning_sections(records: Records, save, styles: dict, load_controller, met
     ``{(run_key, idx): support}``, so that the report folder can keep them.
     """
     from .learning_report import table1_markdown, training_curves_figure
-    from .runner import build_instance
     from .topologies import plot_topology_path, topology_caption
 
     lines, supports = [], {}
@@ -138,13 +138,13 @@ def learning_sections(records: Records, save, styles: dict, load_controller, met
             if support is not None:
                 supports[(r.run_key, r.idx)] = np.asarray(support) != 0
                 entries.append((r.params[weight], r.links, r.cost, support))
-        built = _instance_to_draw(instance, build_instance) if len(entries) >= 2 else None
-        if built is not None:
+        drawing = _drawing_of(instance, entries)
+        if drawing is not None:
             symbol = "β" if weight == "beta" else weight
-            fig, _ = plot_topology_path(built, entries, symbol=symbol)
+            fig, _ = plot_topology_path(drawing, entries, symbol=symbol)
             save(fig, "topologies")
             inst = ", ".join(f"{k} = {v}" for k, v in spec.items())
             lines += [f"## Designed topologies along the {symbol} path (paper Fig. 4)", "",
-                      f"{path[0].label} on one instance ({inst}). " + topology_caption(built.nodes, symbol=symbol), "",
+                      f"{path[0].label} on one instance ({inst}). " + topology_caption(drawing.nodes, symbol=symbol), "",
                       "![designed topologies](topologies.png)", ""]
     return lines, supports

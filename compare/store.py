@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from codesign.controllers import controller_from_arrays
+from codesign.status import FAILED
 
 from .records import Records, canonical_key
 
@@ -327,7 +328,7 @@ class Store:
         """Stored runs that stopped at their time limit: ``run_key -> limit`` in seconds."""
         out = {}
         for key, extras in self._conn.execute(
-                "SELECT run_key, extras FROM designs WHERE status = 'failed' AND extras LIKE '%timeout_s%'"):
+                "SELECT run_key, extras FROM designs WHERE status = ? AND extras LIKE '%timeout_s%'", (FAILED,)):
             limit = json.loads(extras).get("timeout_s") if extras else None
             if limit is not None:
                 out[key] = float(limit)
@@ -436,4 +437,6 @@ class Store:
         pandas, from the optional extra: ``pip install -e ".[analysis]"``;
         without it, raises :class:`compare.export.MissingExtra` (an ImportError).
         """
-        return self.records().to_pandas(self.members())
+        from .export import designs_frame
+
+        return designs_frame(self.records(), self.members())

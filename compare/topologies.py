@@ -6,27 +6,29 @@ node on one line) is laid out on an open circle in chain order, so that a link
 between far-apart nodes is a chord instead of an arc over the chain. Beyond
 :data:`SPY_ABOVE` nodes a node-link drawing is a blot; each graph is then drawn as
 its adjacency pattern (a spy plot): row = receiving node, column = sending node.
+
+The figure needs no instance's matrices: an :class:`InstanceDrawing` holds what it
+draws (both graphs and the node colours), which the runner stores with each
+instance's facts (:func:`drawing_facts`), so that a report draws it from the store
+or from its folder alone.
 """
 
 from __future__ import annotations
 
-import matplotlib.pyplot as plt
-import networkx as nx
 import numpy as np
 
+from codesign.status import OPTIMAL
+
+from .drawing import DRAWN_NODES_AT_MOST, InstanceDrawing, drawing_facts, node_colours  # noqa: F401
 from .records import DesignRecord, as_records
 
-__all__ = ["plot_topology_path", "topology_path_records", "topology_caption", "SPY_ABOVE", "node_order"]
+__all__ = ["plot_topology_path", "topology_path_records", "topology_caption", "SPY_ABOVE", "node_order",
+           "InstanceDrawing", "node_colours", "drawing_facts", "DRAWN_NODES_AT_MOST"]
 
 #: Networks with more nodes than this are drawn as adjacency (spy) plots.
 SPY_ABOVE = 40
 #: Spy plot colours: a designed link, a plant-graph link the design does not use, and a self-loop.
 _LINK, _PLANT_ONLY, _SELF = "#1A1A1A", "#DDDDDD", "#8C8C8C"
-
-
-def _leading_eigenvector(A: np.ndarray) -> np.ndarray:
-    w, V = np.linalg.eig(A)
-    return np.abs(np.real(V[:, np.argmax(np.abs(w))]))
 
 
 def _collinear(pos) -> bool:
@@ -68,6 +70,8 @@ def node_order(adj) -> np.ndarray:
 
 def _draw(ax, adj, pos, colors, title):
     """A node-link drawing; returns the nodes' collection (for the colour bar)."""
+    import networkx as nx
+
     graph = nx.DiGraph()
     graph.add_nodes_from(range(adj.shape[0]))
     graph.add_edges_from((j, i) for i, j in zip(*np.nonzero(adj)) if i != j)  # S_ij != 0: j sends to i
@@ -121,13 +125,6 @@ def _spy(ax, adj, order, colors, title, *, plant=None):
     return strip
 
 
-def _node_colours(instance) -> np.ndarray:
-    colors = _leading_eigenvector(instance.A)
-    if colors.size != instance.nodes:  # several states per node: the norm of each node's entries
-        colors = np.sqrt(np.bincount(instance.state_nodes, weights=colors**2, minlength=instance.nodes))
-    return colors
-
-
 def plot_topology_path(instance, path, *, axes=None, symbol: str = "β"):
     """Draw the plant graph, then each designed topology of a path.
 
@@ -137,9 +134,11 @@ def plot_topology_path(instance, path, *, axes=None, symbol: str = "β"):
 
     Parameters
     ----------
-    instance : codesign.Instance
+    instance : InstanceDrawing or codesign.Instance
         Its plant graph is drawn first; nodes are coloured by the magnitude of
-        the leading eigenvector of A (its norm over the node's states).
+        the leading eigenvector of A (its norm over the node's states). An
+        instance is drawn through :meth:`InstanceDrawing.of`, exactly as the
+        drawing stored with its facts.
     path : list of (weight, links, cost, support)
         One entry per regularization weight, support as an (n, n) array
         (nonzero = link).
@@ -152,7 +151,11 @@ def plot_topology_path(instance, path, *, axes=None, symbol: str = "β"):
     -------
     fig, axes
     """
-    n = instance.plant_adj.shape[0]
+    import matplotlib.pyplot as plt
+    import networkx as nx
+
+    drawing = instance if isinstance(instance, InstanceDrawing) else InstanceDrawing.of(instance)
+    n = drawing.nodes
     spy = n > SPY_ABOVE
     if axes is None:
         width = 2.6 if spy else 2.3
@@ -160,22 +163,22 @@ def plot_topology_path(instance, path, *, axes=None, symbol: str = "β"):
         axes = axes[0]
     else:
         fig = axes[0].figure
-    colors = _node_colours(instance)
-    plant_title = f"plant graph\n|E| = {_links(instance.plant_adj)}"
+    colors = drawing.colours
+    plant_title = f"plant graph\n|E| = {_links(drawing.plant_adj)}"
     titles = [f"{symbol} = {weight:.3g}\n|E| = {links}, J = {cost:.3f}" for weight, links, cost, _ in path]
     if spy:
-        order = node_order((instance.plant_adj != 0) | (instance.comm_adj != 0))
-        mappable = _spy(axes[0], instance.plant_adj, order, colors, plant_title)
+        order = node_order(drawing.plant_adj | drawing.comm_adj)
+        mappable = _spy(axes[0], drawing.plant_adj, order, colors, plant_title)
         for ax, (_, _, _, support), title in zip(axes[1:], path, titles):
-            _spy(ax, support, order, colors, title, plant=instance.plant_adj)
+            _spy(ax, support, order, colors, title, plant=drawing.plant_adj)
         axes[0].set_ylabel("receiving node", fontsize=7)
         for ax in axes:
             ax.set_xlabel("sending node", fontsize=7)
     else:
-        pos = nx.kamada_kawai_layout(nx.from_numpy_array((instance.comm_adj != 0).astype(int)))
+        pos = nx.kamada_kawai_layout(nx.from_numpy_array(drawing.comm_adj.astype(int)))
         if _collinear(pos):  # a chain: straight edges along one line would all hide behind each other
             pos = _chain_on_circle(pos)
-        mappable = _draw(axes[0], instance.plant_adj, pos, colors, plant_title)
+        mappable = _draw(axes[0], drawing.plant_adj, pos, colors, plant_title)
         for ax, (_, _, _, support), title in zip(axes[1:], path, titles):
             _draw(ax, np.asarray(support), pos, colors, title)
     fig.tight_layout()
@@ -212,7 +215,7 @@ def topology_path_records(records, *, method: str = "grnn_sparse", weight: str =
     """
     paths: dict[tuple, dict] = {}
     for r in as_records(records):
-        if r.method != method or r.status != "optimal" or weight not in r.params:
+        if r.method != method or r.status != OPTIMAL or weight not in r.params:
             continue
         paths.setdefault((r.instance.key, r.params_key_without(weight)), {})[r.params[weight]] = r
     if not paths:

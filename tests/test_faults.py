@@ -329,3 +329,35 @@ def test_a_bad_timeout_is_refused(tmp_path):
     for bad in ("0", "-3", "nan", '"long"'):
         with pytest.raises(SpecError, match="timeout: must be a positive number of seconds"):
             load_spec(_spec(tmp_path / "b.toml", ["lqr"], extra=f"timeout = {bad}\n"))
+
+
+def test_a_plugin_that_exits_at_import_is_a_one_line_error(tmp_path):
+    plugin = tmp_path / "exits.py"
+    plugin.write_text("import sys\nsys.exit(3)\n")
+    spec = tmp_path / "s.toml"
+    spec.write_text(f'name = "x"\nplugins = ["{plugin}"]\n{INSTANCES}\n[[methods]]\nmethod = "lqr"\n')
+    line = _error_line(CliRunner().invoke(main, ["run", str(spec), "--out", str(tmp_path / "o"), "--no-progress"]))
+    assert "importing" in line and "SystemExit: 3" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_an_unreachable_scheduler_is_refused_before_a_store_exists(tmp_path):
+    pytest.importorskip("distributed")
+    spec = _spec(tmp_path / "s.toml", ["lqr"])
+    out = tmp_path / "out"
+    line = _error_line(CliRunner().invoke(main, ["run", str(spec), "--out", str(out), "--executor",
+                                                 "dask://127.0.0.1:1", "--no-progress"]))
+    assert "cannot reach the dask scheduler at tcp://127.0.0.1:1" in line
+    assert not (out / "results.sqlite").exists()
+
+
+def test_a_locked_store_and_an_unwritable_folder_are_told_apart(tmp_path, monkeypatch):
+    from compare.store import _explain
+
+    path = tmp_path / "r.sqlite"
+    locked = _explain(path, sqlite3.OperationalError("database is locked"))
+    assert "locked by another process" in locked
+    (tmp_path / "sub").mkdir()
+    monkeypatch.setattr(os, "access", lambda p, mode: False)
+    unwritable = _explain(tmp_path / "sub" / "r.sqlite", sqlite3.OperationalError("unable to open database file"))
+    assert "is not writable" in unwritable and "by another process" not in unwritable

@@ -119,6 +119,17 @@ def test_round_trip_of_a_real_store(stored, tmp_path):
         assert loaded.dtype == bool and np.array_equal(loaded, support)
     with pytest.raises(KeyError):
         back.load_controller(records[0].run_key, 99)
+    # The drawing of the path's instance, as the store holds it; no other instance's (the figure draws one).
+    drawn = {r.instance for r in records if (r.run_key, r.idx) in truth}
+    assert len(drawn) == 1 and all(inst.drawing is not None for inst in records.instances)
+    (instance,) = drawn
+    assert list(json.loads((tmp_path / "report.json").read_text())["drawings"]) == [instance.key]
+    for inst in back.records.instances:
+        if inst.key != instance.key:
+            assert inst.drawing is None
+            continue
+        for name in ("plant_adj", "comm_adj", "colours"):
+            assert np.array_equal(getattr(inst.drawing, name), getattr(instance.drawing, name)), name
 
 
 def test_old_columns_come_first_in_their_order(stored, tmp_path):
@@ -195,11 +206,22 @@ def test_numpy_floats_are_written_as_plain_reprs(tmp_path):
     assert read_folder(tmp_path).records[0].seconds == 0.1 + 0.2
 
 
+GOOD_INSTANCE = json.dumps(_record()["instance"], sort_keys=True)
+GOOD_DRAWING = {"plant": [[0, 1], [0, 1, 2], [1, 2, 3], [2, 3]], "comm": [[0], [1], [2], [3]],
+                "colours": [0.5, 0.25, 0.125, 1.0]}
+
+
 def _good_folder(tmp_path) -> Path:
     rows = [_record(extras={"curve": {"step": [0, 1], "cost": [2.0, 1.5]}}), _record(idx=1)]
-    write_folder(Records.from_rows(rows), tmp_path, meta={}, members={"x": {"k1"}}, superseded=0,
+    facts = {GOOD_INSTANCE: {"n": 4, "plant_links": 6, "comm_links": 0, "drawing": GOOD_DRAWING}}
+    write_folder(Records.from_rows(rows, facts), tmp_path, meta={}, members={"x": {"k1"}}, superseded=0,
                  software={}, supports={("k1", 0): np.ones((2, 2))})
     return tmp_path
+
+
+def test_the_drawn_instances_drawing_round_trips(tmp_path):
+    drawing = read_folder(_good_folder(tmp_path)).records[0].instance.drawing
+    assert drawing.to_facts() == GOOD_DRAWING and drawing.nodes == 4
 
 
 def _edit_csv(name, old, new):
@@ -241,6 +263,12 @@ MALFORMED = [
     (_edit_json(lambda d: d.update(figures=[])), "report.json", "figures must be an object"),
     (_edit_json(lambda d: d["supports"]["k1/0"].update(nonzero=[[0, 2]])), "report.json", "nonzero"),
     (_edit_json(lambda d: d["supports"].update({"k7/0": None})), "report.json", "'k7/0' is no design"),
+    (_edit_json(lambda d: d.update(drawings=[])), "report.json", "drawings must be an object"),
+    (_edit_json(lambda d: d["drawings"].update({'{"n": 5}': GOOD_DRAWING})), "report.json",
+     "drawings: '{\"n\": 5}' is no instance in runs.csv"),
+    (_edit_json(lambda d: d["drawings"][GOOD_INSTANCE].update(colours=[1.0])), "report.json",
+     "drawings: a stored drawing's plant must list the sending nodes of each of its 1 nodes"),
+    (_edit_json(lambda d: d["drawings"][GOOD_INSTANCE].pop("comm")), "report.json", "drawings: a stored drawing must"),
 ]
 
 
@@ -295,7 +323,7 @@ def test_report_without_store_hands_the_folder_data_to_write_report(tmp_path, mo
 
 @pytest.mark.skipif("software" not in inspect.signature(__import__("compare.report").report.write_report).parameters,
                     reason="write_report does not yet take software= (and write the folder's files)")
-def test_compare_report_rebuilds_the_same_report_without_its_store(stored, tmp_path):
+def test_compare_report_rebuilds_the_same_report_without_its_store(stored, tmp_path, monkeypatch):
     from compare import Store
     from compare.cli import _write_report
 
@@ -304,8 +332,41 @@ def test_compare_report_rebuilds_the_same_report_without_its_store(stored, tmp_p
     with Store(path) as store:
         _write_report(store, out)
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    assert set(FOLDER_FILES.values()) <= set(before)
+    assert set(FOLDER_FILES.values()) | {"topologies.png", "topologies.svg"} <= set(before)
+    _refuse_every_build(monkeypatch)  # the topology figure is drawn from report.json, as from the store
     result = CliRunner().invoke(main, ["report", "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert "rebuilt from the folder's runs.csv and report.json" in result.output
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def _refuse_every_build(monkeypatch):
+    from dataclasses import replace
+
+    from compare import execution, families
+
+    def refuse(spec):
+        raise AssertionError(f"an instance was built: {spec}")
+
+    monkeypatch.setattr(execution, "build_instance", refuse)
+    for name in families.family_names():
+        monkeypatch.setitem(families._FAMILIES, name, replace(families.get_family(name), build=refuse))
+
+
+def test_a_folder_written_before_drawings_were_kept_rebuilds_without_the_figure(stored, tmp_path, monkeypatch):
+    from compare import Store
+    from compare.cli import _write_report
+
+    path, _, _, _ = stored
+    out = tmp_path / "out"
+    with Store(path) as store:
+        _write_report(store, out)
+    assert "![designed topologies](topologies.png)" in (out / "report.md").read_text()
+    document = json.loads((out / "report.json").read_text())
+    assert document.pop("drawings")
+    (out / "report.json").write_text(json.dumps(document))
+    _refuse_every_build(monkeypatch)
+    result = CliRunner().invoke(main, ["report", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    text = (out / "report.md").read_text()
+    assert "Designed topologies" not in text and "## Medians by method" in text

@@ -118,19 +118,19 @@ def test_as_records_passes_records_through_and_converts_dicts_and_designs():
 
 
 def test_old_store_without_facts_leaves_them_none_and_nothing_is_rebuilt(tmp_path, monkeypatch):
-    import compare.runner
+    import compare.execution
     from compare.report import plant_links
 
     with _store(tmp_path / "old.sqlite", facts=False) as store:
         records = store.records()
     inst = records[0].instance
     assert not inst.has_facts and inst.plant_links is None and inst.nodes == 8
-    monkeypatch.setattr(compare.runner, "build_instance", lambda spec: pytest.fail("the report built an instance"))
+    monkeypatch.setattr(compare.execution, "build_instance", lambda spec: pytest.fail("the report built an instance"))
     assert plant_links(records) == {}
 
 
 def test_report_boundary_uses_the_stored_facts_without_rebuilding(tmp_path, monkeypatch):
-    import compare.runner
+    import compare.execution
     from compare.report import plant_links
 
     with _store(tmp_path / "s.sqlite", facts=True) as store:
@@ -139,17 +139,17 @@ def test_report_boundary_uses_the_stored_facts_without_rebuilding(tmp_path, monk
     def fail(spec):
         raise AssertionError("the report rebuilt an instance whose facts are stored")
 
-    monkeypatch.setattr(compare.runner, "build_instance", fail)
+    monkeypatch.setattr(compare.execution, "build_instance", fail)
     assert plant_links(records) == {("paper", 8, 0.995): 11.5}
 
 
-def test_to_pandas_has_the_columns_of_designs_frame(tmp_path):
+def test_designs_frame_of_records_has_the_columns_of_the_store_and_of_dict_rows(tmp_path):
     pytest.importorskip("pandas")
     from compare.export import designs_frame
 
     with _store(tmp_path / "s.sqlite", facts=True) as store:
         records = store.records()
-        frame = records.to_pandas(store.members())
+        frame = designs_frame(records, store.members())
         assert list(frame.columns) == list(store.to_pandas().columns)
     # The columns the export gave when records were dicts.
     rows = [{f.name: getattr(r, f.name) for f in dataclasses.fields(r)}

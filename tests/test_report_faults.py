@@ -32,12 +32,12 @@ class InstanceBuilt(BaseException):
 @pytest.fixture(autouse=True)
 def no_instance_is_built(monkeypatch):
     """Every way of building an instance raises (the runner's helper and each registered family's build)."""
-    from compare import families, runner
+    from compare import execution, families
 
     def refuse(spec):
         raise InstanceBuilt(f"the report built an instance: {spec}")
 
-    monkeypatch.setattr(runner, "build_instance", refuse)
+    monkeypatch.setattr(execution, "build_instance", refuse)
     for name in families.family_names():
         monkeypatch.setitem(families._FAMILIES, name, replace(families.get_family(name), build=refuse))
 
@@ -116,18 +116,71 @@ def test_the_compute_section_takes_n_from_the_spec_and_lists_every_size_that_fai
     assert f"- lqr, N = 100000: 1 of 1: {HUGE_MESSAGE}" in compute
 
 
-def test_the_topology_figure_is_left_out_for_an_instance_without_facts(tmp_path):
-    """The one figure that needs an instance's matrices does not build an instance the store has no facts on."""
+def _path_rows(inst):
+    return [_row(inst, "path_method", cost=1.1 - 0.01 * b, links=10 * b, info="delayed", params={"beta": b})
+            for b in (1.0, 2.0, 3.0)]
+
+
+PATH_META = {"method:path_method": {"produces": ["topology_path"], "path_param": "beta"}}
+
+
+def _ring_drawing(n: int) -> dict:
+    """A stored drawing (:func:`compare.topologies.drawing_facts`) of a ring of ``n`` nodes, made without a build."""
+    from types import SimpleNamespace
+
     import numpy as np
 
-    rows = [_row(NO_FACTS[0], "path_method", cost=1.1 - 0.01 * b, links=10 * b, info="delayed", params={"beta": b})
-            for b in (1.0, 2.0, 3.0)]
+    from compare.drawing import drawing_facts
+
+    ring = np.eye(n) + np.eye(n, k=1) + np.eye(n, k=-1) + np.eye(n, k=n - 1) + np.eye(n, k=1 - n)
+    A = 0.4 * ring + 0.01 * np.diag(np.arange(n))
+    return drawing_facts(SimpleNamespace(A=A, plant_adj=ring, comm_adj=ring, nodes=n, state_nodes=np.arange(n)))
+
+
+@pytest.mark.parametrize("facts", [None, {"n": 12, "plant_links": 24, "comm_links": 24}],
+                         ids=["no facts", "facts of a store before drawings"])
+def test_the_topology_figure_is_left_out_for_an_instance_without_a_stored_drawing(tmp_path, facts):
+    """The one figure that needs an instance's graphs does not build an instance the store has no drawing of."""
+    import numpy as np
+
     support = type("Controller", (), {"support": np.eye(12, dtype=bool)})()
-    meta = {"method:path_method": {"produces": ["topology_path"], "path_param": "beta"}}
-    files = write_report(Records.from_rows(rows), tmp_path / "report", meta=meta,
-                         load_controller=lambda run_key, idx: support)
+    records = Records.from_rows(_path_rows(NO_FACTS[0]), {canonical_key(NO_FACTS[0]): facts} if facts else None)
+    files = write_report(records, tmp_path / "report", meta=PATH_META, load_controller=lambda run_key, idx: support)
     text = files["md"].read_text()
     assert "Designed topologies" not in text and "topologies.png" not in files
+
+
+def test_the_topology_figure_is_drawn_from_the_stored_drawing_and_again_from_the_folder(tmp_path):
+    """Every build refuses (the fixture): the figure comes from the facts, then from report.json alone."""
+    import numpy as np
+
+    n = NO_FACTS[0]["n"]
+    facts = {canonical_key(NO_FACTS[0]): {"n": n, "plant_links": 2 * n, "comm_links": 2 * n,
+                                          "drawing": _ring_drawing(n)}}
+    records = Records.from_rows(_path_rows(NO_FACTS[0]), facts)
+    supports = {r.run_key: np.eye(n, dtype=bool) | np.eye(n, k=int(r.params["beta"]), dtype=bool) for r in records}
+    controller = type("Controller", (), {})
+
+    def load_controller(run_key, idx):
+        loaded = controller()
+        loaded.support = supports[run_key]
+        return loaded
+
+    files = write_report(records, tmp_path / "report", meta=PATH_META, load_controller=load_controller)
+    text = files["md"].read_text()
+    assert "## Designed topologies along the β path (paper Fig. 4)" in text
+    assert "![designed topologies](topologies.png)" in text and "circle" in text  # a 12-node node-link drawing
+    stored = json.loads((tmp_path / "report" / "report.json").read_text())["drawings"]
+    assert stored == {canonical_key(NO_FACTS[0]): _ring_drawing(n)}
+
+    data = read_folder(tmp_path / "report")
+    drawing = data.records[0].instance.drawing
+    assert np.array_equal(drawing.colours, records[0].instance.drawing.colours)
+    again = write_report(data.records, tmp_path / "again", meta=data.meta, software=data.software,
+                         load_controller=data.load_controller)
+    assert "![designed topologies](topologies.png)" in again["md"].read_text()
+    for name in ("topologies.png", "topologies.svg", "report.json"):
+        assert (tmp_path / "again" / name).read_bytes() == (tmp_path / "report" / name).read_bytes(), name
 
 
 def test_a_nan_a_norm_is_one_panel_that_sorts_after_every_number():

@@ -46,10 +46,10 @@ def test_run_store_and_resume(tmp_path):
 
 
 _FREED_THEN_MEASURED = """
-from compare import runner
+from compare import execution
 blocks = [bytearray(100_000) for _ in range(5000)]  # 500 MB in blocks malloc keeps on its heap
 del blocks[:-1]  # the last one stays, so the heap cannot simply shrink from its end
-with runner._measured() as watch:
+with execution._measured() as watch:
     pass
 print(watch["peak_mb"])
 """
@@ -124,12 +124,12 @@ def test_noise_scenario_is_recorded(tmp_path):
 
 
 def test_method_exception_becomes_failed_design(tmp_path, monkeypatch):
-    import compare.runner as runner
+    import compare.execution as execution
 
     def boom(*args, **kwargs):
         raise RuntimeError("solver exploded")
 
-    monkeypatch.setattr(runner, "build_instance", boom)
+    monkeypatch.setattr(execution, "build_instance", boom)
     with Store(tmp_path / "r.sqlite") as store:
         summary = run_experiment(parse_spec(SPEC), store, progress=False)
         assert summary.statuses["failed"] == 9

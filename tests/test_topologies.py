@@ -78,3 +78,99 @@ def test_caption_says_how_the_figure_reads():
     assert "row = receiving node" in topology_caption(SPY_ABOVE + 1)
     assert "circle" in topology_caption(SPY_ABOVE) and "β" in topology_caption(20)
     assert "γ" in topology_caption(20, symbol="γ")
+
+
+# -- the drawing stored with an instance's facts ------------------------------------
+
+PAPER = {"family": "paper", "n": 12, "a_norm": 1.1, "b_norm": 1.0, "degree": 4, "hops": 2, "horizon": 10, "seed": 3}
+MASS_SPRING = {"family": "mass_spring", "n": 6, "seed": 1, "dt": 0.2, "horizon": 10, "r": 10.0}
+
+
+@pytest.mark.parametrize("spec", [PAPER, MASS_SPRING], ids=["paper", "mass_spring"])
+def test_the_stored_drawing_gives_the_built_instances_arrays_exactly(spec):
+    """Through the runner's facts and JSON (as the store keeps them), bit for bit the built instance's drawing."""
+    import json
+
+    from compare.records import InstanceRecord
+    from compare.runner import build_instance, instance_facts
+    from compare.drawing import InstanceDrawing, node_colours
+
+    instance = build_instance(spec)
+    stored = json.loads(json.dumps(instance_facts(instance)))
+    drawing = InstanceRecord.from_spec(spec, stored).drawing
+    built = InstanceDrawing.of(instance)
+    assert drawing.nodes == built.nodes == instance.nodes == spec["n"]
+    for name in ("plant_adj", "comm_adj", "colours"):
+        assert getattr(drawing, name).dtype == getattr(built, name).dtype
+        assert np.array_equal(getattr(drawing, name), getattr(built, name)), name
+    assert np.array_equal(drawing.plant_adj, instance.plant_adj != 0)
+    assert np.array_equal(drawing.comm_adj, instance.comm_adj != 0)
+    assert np.array_equal(drawing.colours, node_colours(instance))
+    assert drawing.plant_adj.diagonal().all()  # self-loops kept: spy plots draw them
+    if spec is MASS_SPRING:  # two states per node: one colour per node, the norm of its two entries
+        assert instance.n == 2 * instance.nodes and drawing.colours.shape == (instance.nodes,)
+    with pytest.raises(ValueError):
+        drawing.colours[0] = 1.0  # read-only
+
+
+def test_an_instance_and_its_stored_drawing_draw_the_same_figure():
+    import json
+
+    from compare.runner import build_instance
+    from compare.drawing import InstanceDrawing, drawing_facts
+
+    instance = build_instance(MASS_SPRING)
+    drawing = InstanceDrawing.from_facts(json.loads(json.dumps(drawing_facts(instance))))
+    path = _path(SimpleNamespace(nodes=instance.nodes, plant_adj=instance.plant_adj))
+    drawn = []
+    for source in (instance, drawing):
+        fig, axes = plot_topology_path(source, path)
+        nodes = axes[0].collections[-1]
+        drawn.append((np.asarray(nodes.get_offsets()), nodes.get_array(), [ax.get_title() for ax in axes]))
+        plt.close(fig)
+    (offsets, colours, titles), (offsets2, colours2, titles2) = drawn
+    assert np.array_equal(offsets, offsets2) and np.array_equal(colours, colours2) and titles == titles2
+
+
+def test_no_drawing_is_stored_above_the_node_limit():
+    from compare.drawing import DRAWN_NODES_AT_MOST, drawing_facts
+
+    assert drawing_facts(SimpleNamespace(nodes=DRAWN_NODES_AT_MOST + 1)) is None
+    small = _chain(5)
+    facts = drawing_facts(small)
+    assert facts["plant"][0] == [0, 1] and facts["plant"][2] == [1, 2, 3] and len(facts["colours"]) == 5
+
+
+@pytest.mark.parametrize("facts, problem", [
+    ({"plant": [[0]], "comm": [[0]]}, 'must be {"plant"'),
+    ({"plant": [[0]], "comm": [[0]], "colours": []}, "colours must be one finite number"),
+    ({"plant": [[0]], "comm": [[0]], "colours": [float("nan")]}, "colours must be one finite number"),
+    ({"plant": [[0], [1]], "comm": [[0]], "colours": [1.0]}, "plant must list the sending nodes of each of its 1"),
+    ({"plant": [[0]], "comm": [[1]], "colours": [1.0]}, "comm row 0 must be a list of node numbers 0 to 0"),
+    ({"plant": [[0]], "comm": [[True]], "colours": [1.0]}, "comm row 0"),
+])
+def test_a_malformed_stored_drawing_is_refused_naming_the_problem(facts, problem):
+    from compare.drawing import InstanceDrawing
+
+    with pytest.raises(ValueError, match="a stored drawing") as error:
+        InstanceDrawing.from_facts(facts)
+    assert problem in str(error.value)
+
+
+def test_an_instance_record_carries_its_drawing_and_is_still_keyed_by_its_spec_alone():
+    from compare.records import InstanceRecord
+
+    facts = {"n": 5, "plant_links": 8, "comm_links": 8}
+    drawn = InstanceRecord.from_spec(PAPER, {**facts, "drawing": _chain_drawing(5)})
+    bare = InstanceRecord.from_spec(PAPER, facts)
+    assert bare.drawing is None and InstanceRecord.from_spec(PAPER).drawing is None
+    assert drawn.drawing.nodes == 5 and drawn.has_facts and bare.has_facts
+    assert drawn == bare and hash(drawn) == hash(bare) and len({drawn, bare}) == 1
+    with pytest.raises(ValueError, match="a stored drawing's colours"):
+        InstanceRecord.from_spec(PAPER, {**facts, "drawing": {"plant": [], "comm": [], "colours": []}})
+
+
+def _chain_drawing(n: int) -> dict:
+    from compare.drawing import drawing_facts
+
+    return drawing_facts(_chain(n))

@@ -1,0 +1,225 @@
+"""Executing runs in this process: what a worker does with a task, and what it measures.
+
+:func:`execute_task` runs a task (runs of one method; a batched method designs them
+in one call) and returns, run by run, the scored designs, the wall seconds and the
+peak resident memory. Any exception, or a method's ``sys.exit``, becomes that run's
+``failed`` design. Worker processes (:mod:`compare.pool`, or a dask worker) call it
+after :func:`_limit_threads`; :mod:`compare.runner` calls it directly with one worker.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from contextlib import contextmanager
+from functools import lru_cache
+
+from codesign import Design, count_links
+from codesign.scoring import evaluate
+from codesign.status import FAILED
+
+from .plugins import load_plugins
+from .registry import get_method
+from .spec import Run
+
+__all__ = ["build_instance", "instance_facts", "execute_run", "execute_task", "failed_run", "unsendable",
+           "ExecutorError", "WorkerSetupError"]
+
+# RAYON_NUM_THREADS: Clarabel's faer factorization runs on a rayon pool that otherwise takes every
+# core (seen: SLS at N = 100 kept a second thread busy, so two workers ran three threads on 2 cores).
+_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS",
+                "RAYON_NUM_THREADS")
+
+
+def build_instance(instance_spec: dict):
+    """The :class:`codesign.Instance` described by a run's instance spec."""
+    from .families import get_family
+
+    return get_family(instance_spec["family"]).build(instance_spec)
+
+
+def instance_facts(instance) -> dict:
+    """What a report needs to know about an instance without rebuilding it.
+
+    ``n``, ``plant_links``, ``comm_links`` and the ``drawing`` its topology figure
+    draws (:func:`compare.topologies.drawing_facts`), None for an instance of more
+    than :data:`compare.topologies.DRAWN_NODES_AT_MOST` nodes. (Facts without a
+    ``drawing`` key were stored before drawings were.)
+    """
+    from .drawing import drawing_facts
+
+    return {"n": int(instance.n), "plant_links": count_links(instance.plant_adj)[0],
+            "comm_links": count_links(instance.comm_adj)[0], "drawing": drawing_facts(instance)}
+
+
+def _evaluated(instance, designs, evaluation) -> list[Design]:
+    return [evaluate(instance, d, validation_size=evaluation.validation_size, noise_std=evaluation.noise_std)
+            for d in designs]
+
+
+def _failed(run: Run, exc: BaseException) -> list[Design]:
+    if isinstance(exc, SystemExit):
+        return failed_run(run, f"the method called sys.exit({exc.code!r})")
+    return failed_run(run, f"{type(exc).__name__}: {exc}")
+
+
+def failed_run(run: Run, message: str, extras: dict | None = None) -> list[Design]:
+    """The designs recorded for a run that produced none: one ``failed`` design saying why."""
+    return [Design.failure(run.method, run.params, FAILED, message, extras=dict(extras or {}))]
+
+
+def unsendable(run: Run, result: tuple, exc: Exception) -> tuple:
+    """The result recorded for a run whose designs cannot leave its worker (they do not pickle)."""
+    _, seconds, peak_mb = result
+    return (failed_run(run, f"its design could not be sent back from the worker process "
+                            f"({type(exc).__name__}: {exc}); a method's designs must pickle"), seconds, peak_mb)
+
+
+_STATUS_FILE = "/proc/self/status"
+_CLEAR_REFS = "/proc/self/clear_refs"
+
+
+@lru_cache(maxsize=1)
+def _malloc_trim():
+    """glibc's ``malloc_trim``, or None where there is none (the peak then includes freed memory still held)."""
+    try:
+        import ctypes
+
+        return ctypes.CDLL("libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return None
+
+
+def _release_freed_memory() -> None:
+    """Hand memory that earlier runs freed back to the system (glibc), so that it is not counted again.
+
+    Without it a worker that had run SLS at N = 100 (4.6 GB) kept about 1.2 GB in malloc's
+    free lists, and every later run in it reported that as its peak (LQR: 1200 MB).
+    """
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)
+
+
+def _reset_peak_memory() -> bool:
+    """Start a new resident-memory high-water mark for this process (Linux); False where unsupported."""
+    _release_freed_memory()
+    try:
+        with open(_CLEAR_REFS, "w") as f:
+            f.write("5")  # proc(5): "5" resets the peak resident set size (VmHWM) to the current one
+        return True
+    except OSError:
+        return False
+
+
+def _peak_memory_mb() -> float | None:
+    """This process's peak resident memory (MB) since the last reset, or None if unknown."""
+    try:
+        with open(_STATUS_FILE) as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+@contextmanager
+def _measured():
+    """Wall seconds and peak resident memory (MB, None if unknown) of the block: ``with _measured() as m``."""
+    watch = {"peak_mb": None}
+    tracked = _reset_peak_memory()
+    start = time.perf_counter()
+    try:
+        yield watch
+    finally:
+        watch["seconds"] = time.perf_counter() - start
+        watch["peak_mb"] = _peak_memory_mb() if tracked else None
+
+
+def execute_run(run: Run) -> tuple[list[Design], float, float | None]:
+    """Run one method on one instance and score its designs; any exception becomes a ``failed`` design.
+
+    Returns the designs, the wall seconds and the process's peak resident memory
+    during the run in MB (None where the platform cannot reset the peak: Linux's
+    ``/proc/self/clear_refs`` is used). The peak includes what the worker process
+    already held (the interpreter and the loaded libraries), not what earlier runs
+    freed (returned to the system first, see :func:`_release_freed_memory`).
+    """
+    with _measured() as m:
+        try:
+            instance = build_instance(run.instance)
+            designs = _evaluated(instance, get_method(run.method)(instance, **run.params), run.evaluation)
+        except (Exception, SystemExit) as exc:  # a failing method is a recorded status, never a crashed sweep
+            designs = _failed(run, exc)
+    return designs, m["seconds"], m["peak_mb"]
+
+
+def execute_task(runs: list[Run], plugins=()) -> list[tuple[list[Design], float, float | None]]:
+    """Run a group of runs of one method; a batched method designs them in one call.
+
+    ``plugins`` are imported first (once per process), so that worker processes
+    know the same user methods as the process that planned the runs. Returns
+    ``(designs, seconds)`` per run, in order; the seconds of a batched call are
+    shared equally. If the batched call fails as a whole, each run is retried
+    alone so that one bad run cannot fail its neighbours. Each result is
+    ``(designs, seconds, peak_mb)`` as :func:`execute_run` gives it; the runs of a
+    batched call share its peak memory.
+    """
+    try:
+        load_plugins(plugins)
+        method = get_method(runs[0].method)
+    except Exception as exc:  # the worker's environment, not the run: stop with a message, store nothing
+        names = ", ".join(str(getattr(p, "ref", p)) for p in plugins) or "(none)"
+        raise WorkerSetupError(
+            f"a worker could not load method {runs[0].method!r} (plug-ins: {names}): {exc}; install the plug-ins, "
+            "or make their files reachable at the same paths, on every worker"
+        ) from None
+    if len(runs) == 1 or method.batch is None:
+        return [execute_run(run) for run in runs]
+    with _measured() as m:
+        try:
+            instances = [build_instance(run.instance) for run in runs]
+            results = method.run_batch([(inst, run.params) for inst, run in zip(instances, runs)])
+            results = [_evaluated(inst, designs, run.evaluation) for inst, designs, run in zip(instances, results, runs)]
+        except (Exception, SystemExit):
+            results = None
+    if results is None:
+        return [execute_run(run) for run in runs]
+    share = m["seconds"] / len(runs)
+    return [(designs, share, m["peak_mb"]) for designs in results]
+
+
+_LIMITS = []  # the worker's threadpoolctl limits, kept for the process's lifetime
+
+
+def _limit_threads() -> None:
+    """Make this (worker) process single-threaded in every thread pool.
+
+    Runs as the pool's initializer, after unpickling it imported this module and with
+    it numpy: OpenBLAS has already started its threads by then, so the environment
+    variables alone come too late for it (measured: two workers each ran 2-thread
+    OpenBLAS on 2 cores, and numpy-bound methods at N = 100 took 3-20x their
+    single-process time). threadpoolctl caps the pools already loaded; the variables
+    cover those loaded later (MKL in SCS, rayon in Clarabel, OpenMP), and torch is
+    set directly.
+    """
+    for var in _THREAD_VARS:
+        os.environ[var] = "1"
+    from threadpoolctl import threadpool_limits
+
+    _LIMITS.append(threadpool_limits(limits=1))
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except ImportError:  # pragma: no cover
+        pass
+
+
+class ExecutorError(ValueError):
+    """An executor address that cannot be used."""
+
+
+class WorkerSetupError(ExecutorError):
+    """A worker that cannot import the experiment's plug-ins (or find its method)."""

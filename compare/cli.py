@@ -136,17 +136,22 @@ class _RunCommand(click.Command):
 def _report(records, out: Path, *, meta: dict, members: dict, superseded: int, load_controller,
             software: dict | None = None) -> dict:
     """Write the report of ``records`` into ``out``: titles, specs and commands come from ``meta``."""
+    from .meta import MetaError, StoreMeta
     from .report import write_report
 
-    specs = {k.split(":", 1)[1]: v for k, v in meta.items() if k.startswith("spec:")}
-    commands = [v for k, v in sorted(meta.items()) if k.startswith("command:")]
+    try:
+        store_meta = StoreMeta.parse(meta)
+    except MetaError as exc:
+        raise UserError(f"cannot write the report: {exc}") from None
+    specs = dict(store_meta.specs)
+    commands = [store_meta.commands[name] for name in sorted(store_meta.commands)]
     commands.append(f"compare report --out {out}")
     title = "Comparison report: " + ", ".join(sorted(specs)) if specs else "Comparison report"
     # software is None from a store: the report prints the installed versions.
     try:
         return write_report(records, out, specs=specs, title=title, commands=commands,
-                            load_controller=load_controller, meta=meta, members=members, superseded=superseded,
-                            software=software)
+                            load_controller=load_controller, meta=store_meta, members=members,
+                            superseded=superseded, software=software)
     except OSError as exc:
         raise UserError(f"cannot write the report to {out}: {exc.strerror or exc} (stored runs are kept; "
                         "`compare report` writes it again)") from None
@@ -220,6 +225,7 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
         _check_folder(out)
     if store_path is not None:
         _check_file(store_path)
+    from .meta import MetaKind, meta_key
     from .runner import ExecutorError, StoreBusy, open_executor, run_experiment
     from .spec import SpecError, load_spec
 
@@ -245,7 +251,7 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
                 sys.exit(130)
             click.echo(str(summary))
             command = f"compare run {experiment}" + (f" --out {out}" if out != RESULTS / spec.name else "")
-            store.set_meta(f"command:{spec.name}", command)
+            store.set_meta(meta_key(MetaKind.COMMAND, spec.name), command)
             files = _write_report(store, out)
     except (ExecutorError, StoreBusy) as exc:
         raise UserError(str(exc)) from None

@@ -41,6 +41,7 @@ import numpy as np
 
 from .records import Records, as_records, canonical_key
 from .drawing import InstanceDrawing
+from .meta import StoreMeta
 
 __all__ = ["write_folder", "read_folder", "FolderData", "FolderError", "StoredSupport", "topology_supports",
            "FOLDER_FILES", "FOLDER_FORMAT"]
@@ -226,16 +227,17 @@ def write_folder(records, out, *, meta: Mapping, members: Mapping, superseded: i
     return files
 
 
-def topology_supports(records, meta: Mapping, load_controller: Callable) -> dict[tuple[str, int], Any]:
+def topology_supports(records, meta: Mapping | StoreMeta, load_controller: Callable) -> dict[tuple[str, int], Any]:
     """The supports of the controllers the topology figure draws: ``(run_key, idx) -> array or None``.
 
     The same path as :func:`compare.report.write_report` picks (the first method,
-    by name, that declares a ``topology_path``), each design's ``support`` (None for
+    by name, that declares a ``topology_path`` in ``meta``, :meth:`compare.store.Store.meta`
+    or its :class:`compare.meta.StoreMeta`), each design's ``support`` (None for
     a design whose controller has none); empty when no path has two designs.
     """
     from .report_sections import topology_path
 
-    path, _ = topology_path(as_records(records), meta)
+    path, _ = topology_path(as_records(records), StoreMeta.of(meta))
     if len(path) < 2:
         return {}
     return {(r.run_key, r.idx): getattr(load_controller(r.run_key, r.idx), "support", None) for r in path}

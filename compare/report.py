@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import textwrap
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from codesign.status import OPTIMAL  # noqa: E402
 
 from .cost_links import Point, aggregate, pareto_front, plot_cost_vs_links, quartiles  # noqa: E402
 from .figures import LINESTYLES, OFF_SCALE, drawn_styles, plot_budget_fronts  # noqa: E402
+from .meta import StoreMeta  # noqa: E402
 from .records import Records, as_records  # noqa: E402
 from .report_sections import delayed_section, experiments_with, learning_sections  # noqa: E402
 from .report_tables import (_budget_tables, _environment_lines, _fingerprint_lines, _paired_lines,  # noqa: E402
@@ -116,17 +118,16 @@ def _save(out: Path, files: dict, drawn: dict):
     return save
 
 
-def _asked_pairs(records: Records, meta: dict) -> list[tuple[str, str]]:
+def _asked_pairs(records: Records, meta: StoreMeta) -> list[tuple[str, str]]:
     """The (first, second) label pairs the specs ask for (``pairs`` in a spec; method names map to labels)."""
     by_method = {r.method: r.label for r in records}
     labels = records.by_label
     asked = []
-    for key, pairs in sorted(meta.items()):
-        if key.startswith("pairs:"):
-            for first, second in pairs:
-                pair = tuple(by_method.get(x, x) for x in (first, second))
-                if all(x in labels for x in pair) and pair not in asked:
-                    asked.append(pair)
+    for _, pairs in sorted(meta.pairs.items()):
+        for first, second in pairs:
+            pair = tuple(by_method.get(x, x) for x in (first, second))
+            if all(x in labels for x in pair) and pair not in asked:
+                asked.append(pair)
     return asked
 
 
@@ -153,7 +154,7 @@ def _missing_lines(records: Records, points: list[Point], boundaries: dict) -> l
 
 
 def write_report(records, out, *, specs: dict | None = None, title: str = "Comparison report",
-                 commands: list[str] | None = None, load_controller=None, meta: dict | None = None,
+                 commands: list[str] | None = None, load_controller=None, meta: Mapping | StoreMeta | None = None,
                  members: dict | None = None, superseded: int = 0, software: dict | None = None) -> dict[str, Path]:
     """Write the report into ``out``: report.md, report.html, figures, and the data that rebuild them.
 
@@ -175,10 +176,11 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     load_controller : callable, optional
         ``(run_key, idx) -> controller`` (e.g. :meth:`Store.controller`), for the
         designed-topology figure.
-    meta : dict, optional
-        :meth:`Store.meta`: the sections each experiment asks for, what each method
-        declares it produces and code fingerprints. Sections come from these
-        declarations only.
+    meta : dict or StoreMeta, optional
+        :meth:`Store.meta` (or its :class:`compare.meta.StoreMeta`, parsed once here
+        otherwise): the sections each experiment asks for, what each method declares
+        it produces and code fingerprints. Sections come from these declarations
+        only. ``report.json`` keeps it as given.
     members : dict, optional
         :meth:`Store.members`: experiment name -> its run keys.
     superseded : int
@@ -202,7 +204,7 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     records = report_records(records)
-    meta, members = dict(meta or {}), dict(members or {})
+    meta, members = StoreMeta.of(meta), dict(members or {})
     software = dict(software) if software else software_versions()
     styles = label_styles(records)
     points = aggregate(records)
@@ -286,8 +288,8 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     for name, text in sorted((specs or {}).items()):
         lines += [f"## Spec `{name}`", "", "```toml", text.strip(), "```", ""]
 
-    files.update(write_folder(records, out, meta=meta, members=members, superseded=superseded, software=software,
-                              supports=supports, figures=drawn))
+    files.update(write_folder(records, out, meta=meta.to_mapping(), members=members, superseded=superseded,
+                              software=software, supports=supports, figures=drawn))
     files["md"] = out / "report.md"
     files["md"].write_text("\n".join(lines) + "\n")
     interactive = {"cost_vs_links.png": figure_div(cost_links_figure(records, styles), "fig-cost-vs-links")}
@@ -305,7 +307,7 @@ def _panels_text(instances: dict) -> str:
     return f"{len(instances)} panel{'s' if len(instances) != 1 else ''}, {each}"
 
 
-def _provenance_lines(records: Records, meta: dict, commands, superseded: int, statuses: Counter,
+def _provenance_lines(records: Records, meta: StoreMeta, commands, superseded: int, statuses: Counter,
                       software: dict) -> list[str]:
     """How the report was computed: where, with what estimator and precision, by which code, with what outcome."""
     lines = ["## How this report was computed", ""]

@@ -12,6 +12,7 @@ from collections import defaultdict
 import numpy as np
 
 from .figures import plot_budget_fronts
+from .meta import MethodMeta, StoreMeta
 from .records import OK_STATUSES, Records, as_records
 from .statistics import budget_fronts
 
@@ -55,21 +56,21 @@ def delayed_section(records, save, styles: dict, boundaries: dict) -> list[str]:
                "draw the bound no delayed controller can beat."), ""]
 
 
-def experiments_with(section: str, records: Records, meta: dict, members: dict) -> tuple[list[str], Records]:
+def experiments_with(section: str, records: Records, meta: StoreMeta, members: dict) -> tuple[list[str], Records]:
     """The experiments that ask for ``section`` and the records of their runs."""
-    names = sorted(k.split(":", 1)[1] for k, v in meta.items() if k.startswith("sections:") and section in v)
+    names = sorted(name for name, sections in meta.sections.items() if section in sections)
     keys = set().union(*(members.get(n, set()) for n in names)) if names else set()
     # A store written before experiments recorded their members: a run belongs to the one that computed it.
     unlisted = {n for n in names if not members.get(n)}
     return names, records.filter(lambda r: r.run_key in keys or r.experiment in unlisted)
 
 
-def _producing(product: str, meta: dict) -> dict:
+def _producing(product: str, meta: StoreMeta) -> dict[str, MethodMeta]:
     """Method name -> its stored declaration, for methods that declare ``product``."""
-    return {k.split(":", 1)[1]: v for k, v in meta.items() if k.startswith("method:") and product in v.get("produces", [])}
+    return {name: declared for name, declared in meta.methods.items() if product in declared.produces}
 
 
-def topology_path(records, meta: dict) -> tuple[list, str | None]:
+def topology_path(records, meta: StoreMeta) -> tuple[list, str | None]:
     """The designs the topology figure draws and the name of their path's weight (``[]``, None if none).
 
     The path of the first method, by name, that declares a ``topology_path``
@@ -78,9 +79,9 @@ def topology_path(records, meta: dict) -> tuple[list, str | None]:
     from .topologies import topology_path_records
 
     for name, declared in sorted(_producing("topology_path", meta).items()):
-        path = topology_path_records(records, method=name, weight=declared["path_param"])
+        path = topology_path_records(records, method=name, weight=declared.path_param)
         if path:
-            return path, declared["path_param"]
+            return path, declared.path_param
     return [], None
 
 
@@ -101,7 +102,7 @@ def _drawing_of(instance, entries):
     return drawing if all(np.shape(support) == shape for *_, support in entries) else None
 
 
-def learning_sections(records: Records, save, styles: dict, load_controller, meta: dict,
+def learning_sections(records: Records, save, styles: dict, load_controller, meta: StoreMeta,
                       members: dict) -> tuple[list[str], dict]:
     """Sections the data asks for: Table 1 and training curves of the experiments that declare them,
     and the designed-topology path of a method that declares one.

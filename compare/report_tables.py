@@ -14,6 +14,7 @@ import numpy as np
 
 from .cost_links import Point, pareto_front
 from .findings import UNCERTAIN_RSE, unresolved
+from .meta import StoreMeta
 from .records import OK_STATUSES, Records
 from .statistics import best_tables, covered_quantiles, paired_comparisons, panel_title
 
@@ -127,7 +128,7 @@ def _paired_table(comparisons: dict, title: str, info: Mapping) -> list[str]:
     return lines
 
 
-def _paired_lines(records: Records, meta: dict) -> list[str]:
+def _paired_lines(records: Records, meta: StoreMeta) -> list[str]:
     """GRNN-Sparse against every other method, and the pairs the specs ask for, per budget."""
     labels = records.by_label
     by_method = {r.method: r.label for r in records}
@@ -139,12 +140,11 @@ def _paired_lines(records: Records, meta: dict) -> list[str]:
     if reference:
         lines += _paired_table(paired_comparisons(records, reference), f"{reference} against every method", info)
     asked = []
-    for key, pairs in sorted(meta.items()):
-        if key.startswith("pairs:"):
-            for first, second in pairs:
-                pair = tuple(by_method.get(x, x) for x in (first, second))
-                if all(x in labels for x in pair) and pair not in asked and pair[0] != reference:
-                    asked.append(pair)
+    for _, pairs in sorted(meta.pairs.items()):
+        for first, second in pairs:
+            pair = tuple(by_method.get(x, x) for x in (first, second))
+            if all(x in labels for x in pair) and pair not in asked and pair[0] != reference:
+                asked.append(pair)
     for first, second in asked:
         lines += _paired_table(paired_comparisons(records, first, others={second}), f"{first} against {second}", info)
     if not lines:
@@ -197,9 +197,9 @@ def _uncertain_text(records: Records) -> str:
             "\"Costs dominated by rare divergent draws\"); the figures and tables still show them.")
 
 
-def _environment_lines(meta: dict) -> list[str]:
+def _environment_lines(meta: StoreMeta) -> list[str]:
     """Where each experiment's runs were computed (recorded by the runner when it computed runs)."""
-    rows = [(k.split(":", 1)[1], v) for k, v in sorted(meta.items()) if k.startswith("environment:")]
+    rows = sorted(meta.environments.items())
     if not rows:
         return []
     lines = ["| experiment | computed | commit | CPU | workers (of cores) | python |", "|---|---|---|---|---|---|"]
@@ -225,7 +225,7 @@ def _pareto_tables(points: list[Point]) -> list[str]:
     return lines
 
 
-def _fingerprint_lines(records: Records, meta: dict) -> list[str]:
+def _fingerprint_lines(records: Records, meta: StoreMeta) -> list[str]:
     """Which code produced the runs: one row per (method, fingerprint)."""
     runs = defaultdict(set)
     for r in records:
@@ -236,7 +236,8 @@ def _fingerprint_lines(records: Records, meta: dict) -> list[str]:
              "scipy, cvxpy, clarabel and torch. `runs.csv` gives each run's fingerprint.", "",
              "| method | fingerprint | runs | numerical packages |", "|---|---|---:|---|"]
     for (method, fp), keys in sorted(runs.items()):
-        versions = meta.get(f"fingerprint:{fp}", {}).get("versions", {})
+        stored = meta.fingerprints.get(fp)
+        versions = stored.versions if stored is not None else {}
         text = ", ".join(f"{k} {v}" for k, v in sorted(versions.items())) or "—"
         lines.append(f"| {method} | `{fp}` | {len(keys)} | {text} |")
     return lines + [""]

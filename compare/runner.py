@@ -35,6 +35,7 @@ from .execution import (  # noqa: F401 - re-exported: the runner's public names
     instance_facts,
 )
 from .fingerprint import fingerprint_details
+from .meta import MetaKind, meta_key
 from .pool import WorkerPool
 from .records import canonical_key
 from .registry import get_method
@@ -189,17 +190,18 @@ def _drain(pool: Executor, tasks: list[list[Run]], plugins, record) -> None:
 
 def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store) -> None:
     """Store what the report needs beside the runs: the spec, methods, fingerprints and instance facts."""
-    store.set_meta(f"spec:{spec.name}", spec.source)
-    store.set_meta(f"sections:{spec.name}", list(spec.sections))
-    store.set_meta(f"pairs:{spec.name}", [list(pair) for pair in spec.pairs])
+    store.set_meta(meta_key(MetaKind.SPEC, spec.name), spec.source)
+    store.set_meta(meta_key(MetaKind.SECTIONS, spec.name), list(spec.sections))
+    store.set_meta(meta_key(MetaKind.PAIRS, spec.name), [list(pair) for pair in spec.pairs])
     store.set_members(spec.name, [run.key for run in runs])
     for name in dict.fromkeys(run.method for run in runs):
         m = get_method(name)
         details = fingerprint_details(m.modules)
-        store.set_meta(f"method:{name}", {"label": m.label, "summary": m.summary, "produces": list(m.produces),
-                                          "path_param": m.path_param, "fingerprint": details["fingerprint"]})
-        store.set_meta(f"fingerprint:{details['fingerprint']}", {"modules": details["modules"],
-                                                                 "versions": details["versions"]})
+        store.set_meta(meta_key(MetaKind.METHOD, name), {
+            "label": m.label, "summary": m.summary, "produces": list(m.produces), "path_param": m.path_param,
+            "fingerprint": details["fingerprint"]})
+        store.set_meta(meta_key(MetaKind.FINGERPRINT, details["fingerprint"]),
+                       {"modules": details["modules"], "versions": details["versions"]})
     known = store.instance_facts()
     for key, spec_dict in {canonical_key(run.instance): run.instance for run in runs}.items():
         if key not in known:
@@ -294,8 +296,8 @@ def run_experiment(
         executor_name = (executor if isinstance(executor, str)
                          else "process" if executor is None or isinstance(executor, WorkerPool)
                          else type(executor).__name__)
-        store.set_meta(f"environment:{spec.name}", environment(1 if executor is None and workers <= 1 else workers,
-                                                               executor_name))
+        store.set_meta(meta_key(MetaKind.ENVIRONMENT, spec.name),
+                       environment(1 if executor is None and workers <= 1 else workers, executor_name))
     told = False
     try:
         while pending:

@@ -27,6 +27,7 @@ import numpy as np
 from codesign.controllers import controller_from_arrays
 from codesign.status import FAILED
 
+from .meta import MetaKind, entries_of, meta_key
 from .records import Records, canonical_key
 
 __all__ = ["Store", "StoreError", "APPLICATION_ID", "SCHEMA_VERSION"]
@@ -78,9 +79,6 @@ CREATE TABLE IF NOT EXISTS members (
     PRIMARY KEY (experiment, run_key)
 );
 """
-
-#: Meta entries ``instance:<instance key>`` hold the facts the runner stored about an instance.
-_FACTS = "instance:"
 
 #: A claim from another host with no heartbeat for this long is taken over.
 STALE_SECONDS = 6 * 3600.0
@@ -239,11 +237,11 @@ class Store:
 
     def set_instance_facts(self, instance_spec: dict, facts: dict) -> None:
         """Store what a report needs to know about an instance (:func:`compare.runner.instance_facts`)."""
-        self.set_meta(_FACTS + canonical_key(instance_spec), facts)
+        self.set_meta(meta_key(MetaKind.INSTANCE, canonical_key(instance_spec)), facts)
 
     def instance_facts(self) -> dict[str, dict]:
         """Instance key (:func:`compare.records.canonical_key` of its spec) -> its stored facts."""
-        return {k[len(_FACTS):]: v for k, v in self.meta().items() if k.startswith(_FACTS)}
+        return entries_of(self.meta(), MetaKind.INSTANCE)
 
     def set_members(self, experiment: str, keys) -> None:
         """Record which runs make up an experiment now (a run may belong to several).

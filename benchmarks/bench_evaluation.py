@@ -30,6 +30,7 @@ import numpy as np
 from baselines import gcnn_batch
 from codesign import grnn_batch, paper_instance, validation_set
 from codesign.evaluation import VALIDATION_SIZE, simulate_to_precision
+from codesign.status import OPTIMAL
 
 
 def rollout_before(instance, controller, x):
@@ -76,7 +77,7 @@ def main():
         for a_norm in (0.995, 1.05):
             before_rel, after_rel, before_s, after_s, draws = [], [], [], [], []
             for instance, design in zip(instances, designs):
-                if instance.spec["a_norm"] != a_norm or design.status != "optimal":
+                if instance.spec["a_norm"] != a_norm or design.status != OPTIMAL:
                     continue
                 x = validation_set(instance, 1000)
                 tick = time.perf_counter()

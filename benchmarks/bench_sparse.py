@@ -29,6 +29,7 @@ from baselines import sparse_admm, sparse_sdp  # noqa: E402
 from baselines._sparse import pattern_of  # noqa: E402
 from baselines.sparse_sdp import SDP_MAX_STATES  # noqa: E402
 from codesign.instances import paper_instance  # noqa: E402
+from codesign.status import OPTIMAL  # noqa: E402
 
 TARGETS = {"sparse_admm": 5.0, "sparse_sdp": 10.0}  # seconds for 10 γ at N = 20
 SDP_PER_GAMMA_N50 = 5.0  # seconds per γ at N = 50
@@ -43,7 +44,7 @@ def run(method, instance, **kwargs):
 
 
 def describe(name, n, a_norm, designs, total):
-    ok = [d for d in designs if d.status == "optimal"]
+    ok = [d for d in designs if d.status == OPTIMAL]
     # The γ = inf end is the decentralized gain, computed once: count the finite γ.
     gammas = sum(np.isfinite(d.params["gamma"]) for d in designs)
     per_gamma = total / gammas
@@ -65,7 +66,7 @@ def describe(name, n, a_norm, designs, total):
         line += f"  [target < {SDP_PATH_N100:g} s: {'met' if total < SDP_PATH_N100 else 'MISSED'}]"
     print(line, flush=True)
     for d in designs:
-        if d.status != "optimal":
+        if d.status != OPTIMAL:
             print(f"    gamma {d.params['gamma']:.3g}: {d.status} after {d.extras.get('iterations', '?')} iterations "
                   f"({d.extras.get('solve_time', float('nan')):.1f} s): {d.message}", flush=True)
     return per_gamma

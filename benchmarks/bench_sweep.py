@@ -18,6 +18,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from codesign.status import OPTIMAL
 from compare import Store, load_spec, run_experiment
 
 
@@ -31,7 +32,7 @@ def timed(spec, workers: int) -> float:
         start = time.perf_counter()
         summary = run_experiment(spec, store, workers=workers, progress=False)
         seconds = time.perf_counter() - start
-    bad = {k: v for k, v in summary.statuses.items() if k != "optimal"}
+    bad = {k: v for k, v in summary.statuses.items() if k != OPTIMAL}
     print(f"  {workers} worker(s): {seconds:7.1f} s for {summary.computed} runs"
           + (f" (non-optimal designs: {bad})" if bad else ""))
     return seconds

@@ -36,7 +36,7 @@ STATUS_WORDS = {"optimal", "inaccurate", "infeasible", "diverged", "failed"}
 #: The only file allowed to spell them.
 DEFINING_FILE = ROOT / "codesign" / "status.py"
 #: The folders held to that.
-CHECKED_FOLDERS = ["codesign", "baselines", "compare"]
+CHECKED_FOLDERS = ["codesign", "baselines", "compare", "benchmarks"]
 
 _SKIPPED = {tokenize.NL, tokenize.COMMENT, tokenize.INDENT, tokenize.DEDENT, tokenize.ENCODING,
             tokenize.ENDMARKER}

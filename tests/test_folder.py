@@ -323,7 +323,7 @@ def test_report_without_store_hands_the_folder_data_to_write_report(tmp_path, mo
 
 @pytest.mark.skipif("software" not in inspect.signature(__import__("compare.report").report.write_report).parameters,
                     reason="write_report does not yet take software= (and write the folder's files)")
-def test_compare_report_rebuilds_the_same_report_without_its_store(stored, tmp_path, monkeypatch):
+def test_compare_report_rebuilds_the_same_report_without_its_store(stored, tmp_path, forbid_instance_builds):
     from compare import Store
     from compare.cli import _write_report
 
@@ -333,27 +333,15 @@ def test_compare_report_rebuilds_the_same_report_without_its_store(stored, tmp_p
         _write_report(store, out)
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     assert set(FOLDER_FILES.values()) | {"topologies.png", "topologies.svg"} <= set(before)
-    _refuse_every_build(monkeypatch)  # the topology figure is drawn from report.json, as from the store
+    forbid_instance_builds()  # the topology figure is drawn from report.json, as from the store
     result = CliRunner().invoke(main, ["report", "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert "rebuilt from the folder's runs.csv and report.json" in result.output
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
-def _refuse_every_build(monkeypatch):
-    from dataclasses import replace
-
-    from compare import execution, families
-
-    def refuse(spec):
-        raise AssertionError(f"an instance was built: {spec}")
-
-    monkeypatch.setattr(execution, "build_instance", refuse)
-    for name in families.family_names():
-        monkeypatch.setitem(families._FAMILIES, name, replace(families.get_family(name), build=refuse))
-
-
-def test_a_folder_written_before_drawings_were_kept_rebuilds_without_the_figure(stored, tmp_path, monkeypatch):
+def test_a_folder_written_before_drawings_were_kept_rebuilds_without_the_figure(stored, tmp_path,
+                                                                                forbid_instance_builds):
     from compare import Store
     from compare.cli import _write_report
 
@@ -365,7 +353,7 @@ def test_a_folder_written_before_drawings_were_kept_rebuilds_without_the_figure(
     document = json.loads((out / "report.json").read_text())
     assert document.pop("drawings")
     (out / "report.json").write_text(json.dumps(document))
-    _refuse_every_build(monkeypatch)
+    forbid_instance_builds()
     result = CliRunner().invoke(main, ["report", "--out", str(out)])
     assert result.exit_code == 0, result.output
     text = (out / "report.md").read_text()

@@ -7,7 +7,6 @@ the test instead of allocating tens of GiB.
 """
 
 import json
-from dataclasses import replace
 
 import pytest
 
@@ -25,21 +24,10 @@ HUGE_MESSAGE = "MemoryError: Unable to allocate 74.5 GiB for an array with shape
 NAN_MESSAGE = "InstanceError: a_norm must be finite, got nan"
 
 
-class InstanceBuilt(BaseException):
-    """Raised by any build: a BaseException, so that no ``except Exception`` in the report hides it."""
-
-
 @pytest.fixture(autouse=True)
-def no_instance_is_built(monkeypatch):
+def no_instance_is_built(forbid_instance_builds):
     """Every way of building an instance raises (the runner's helper and each registered family's build)."""
-    from compare import execution, families
-
-    def refuse(spec):
-        raise InstanceBuilt(f"the report built an instance: {spec}")
-
-    monkeypatch.setattr(execution, "build_instance", refuse)
-    for name in families.family_names():
-        monkeypatch.setitem(families._FAMILIES, name, replace(families.get_family(name), build=refuse))
+    forbid_instance_builds()
 
 
 def _row(inst, method, *, status="optimal", cost=None, links=None, info="instantaneous", message="", params=None):

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import inspect
 import math
+import operator
 import re
 import types
 import typing
@@ -85,55 +86,42 @@ def _finite(value) -> bool:
 
 
 @dataclass(frozen=True)
-class AtLeast:
+class _Compared:
+    """A finite number in a fixed relation to ``bound``; the subclasses name the relation."""
+
+    bound: float
+    _symbol = ""
+    _holds = staticmethod(lambda value, bound: False)
+
+    def allows(self, value) -> bool:
+        return _finite(value) and self._holds(value, self.bound)
+
+    def __str__(self) -> str:
+        return f"{self._symbol} {self.bound:g}"
+
+
+class AtLeast(_Compared):
     """A number ``>= bound`` (and finite)."""
 
-    bound: float
-
-    def allows(self, value) -> bool:
-        return _finite(value) and value >= self.bound
-
-    def __str__(self) -> str:
-        return f">= {self.bound:g}"
+    _symbol, _holds = ">=", staticmethod(operator.ge)
 
 
-@dataclass(frozen=True)
-class Above:
+class Above(_Compared):
     """A number ``> bound`` (and finite)."""
 
-    bound: float
-
-    def allows(self, value) -> bool:
-        return _finite(value) and value > self.bound
-
-    def __str__(self) -> str:
-        return f"> {self.bound:g}"
+    _symbol, _holds = ">", staticmethod(operator.gt)
 
 
-@dataclass(frozen=True)
-class AtMost:
+class AtMost(_Compared):
     """A number ``<= bound`` (and finite)."""
 
-    bound: float
-
-    def allows(self, value) -> bool:
-        return _finite(value) and value <= self.bound
-
-    def __str__(self) -> str:
-        return f"<= {self.bound:g}"
+    _symbol, _holds = "<=", staticmethod(operator.le)
 
 
-@dataclass(frozen=True)
-class Below:
+class Below(_Compared):
     """A number ``< bound`` (and finite)."""
 
-    bound: float
-
-    def allows(self, value) -> bool:
-        return _finite(value) and value < self.bound
-
-    def __str__(self) -> str:
-        return f"< {self.bound:g}"
+    _symbol, _holds = "<", staticmethod(operator.lt)
 
 
 @dataclass(frozen=True)

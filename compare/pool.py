@@ -56,17 +56,16 @@ def _watch_parent(parent_pid: int) -> None:
             os._exit(1)
 
 
-def _sendable(runs, results) -> list:
-    """``results`` with every run whose designs cannot be pickled replaced by a recorded failure."""
+def _pickled(runs, results) -> list[bytes]:
+    """Each run's result pickled once, here; a run whose designs cannot be pickled gets a recorded failure."""
     from .execution import unsendable
 
     out = []
     for run, result in zip(runs, results):
         try:
-            pickle.dumps(result)
+            out.append(pickle.dumps(result))
         except Exception as exc:  # noqa: BLE001 - any pickling error is this run's fault
-            result = unsendable(run, result, exc)
-        out.append(result)
+            out.append(pickle.dumps(unsendable(run, result, exc)))
     return out
 
 
@@ -84,7 +83,7 @@ def _serve(conn, parent_pid: int) -> None:
             return
         conn.send(("started", task_id, None))
         try:
-            reply = ("done", task_id, _sendable(runs, execute_task(runs, plugins)))
+            reply = ("done", task_id, _pickled(runs, execute_task(runs, plugins)))
         except WorkerSetupError as exc:
             reply = ("setup", task_id, str(exc))
         except BaseException as exc:  # noqa: BLE001 - whatever escaped the runs' own guards
@@ -207,8 +206,8 @@ class WorkerPool:
                         self._fail(runs, f"the task raised {payload}", now - started, queue, record)
                     else:
                         self._release(worker)
-                        for run, result in zip(runs, payload):
-                            record(run, *result)
+                        for run, pickled in zip(runs, payload):
+                            record(run, *pickle.loads(pickled))
                     if on_finish is not None:
                         on_finish(runs)
                 elif deadline is not None and now > deadline:

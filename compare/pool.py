@@ -69,9 +69,30 @@ def _pickled(runs, results) -> list[bytes]:
     return out
 
 
+_HELD = {signal.SIGINT, signal.SIGTERM}
+
+
+def _start_with_signals_held(process) -> None:
+    """Start ``process`` with Ctrl-C and SIGTERM held back in this thread until it is started.
+
+    Otherwise an interrupt inside ``start()`` could leave a half-started worker that the pool
+    does not know and cannot stop. The child inherits the held mask, so a Ctrl-C reaching it
+    before :func:`_serve` ignores SIGINT waits there, and is then dropped.
+    """
+    hold = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD) if hold else None
+    try:
+        process.start()
+    finally:
+        if hold:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 def _serve(conn, parent_pid: int) -> None:
     """A worker's life: take a task, run it, send back its results; end when the pipe closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _HELD)  # held while it was started
     _die_with_parent(parent_pid)
     from .execution import WorkerSetupError, _limit_threads, execute_task
 
@@ -113,7 +134,7 @@ class _Worker:
         self.conn, child = context.Pipe()
         self.process = context.Process(target=_serve, args=(child, os.getpid()), daemon=True,
                                        name="compare-worker")
-        self.process.start()
+        _start_with_signals_held(self.process)
         child.close()
         self.task = None  # (task id, runs, started, deadline)
 

@@ -5,10 +5,10 @@ Public names::
     from baselines import lqr, autonomous, decentralized, polish_gain
     from baselines import sls, sls_topologies, is_quadratically_invariant
     from baselines import sparse_admm, sparse_sdp, truncated_lqr, sparse_delayed
-    from baselines import gcnn, gcnn_batch, GCNNController
+    from baselines import gcnn, gcnn_batch, GCNNController   # the learned baseline, from codesign.learned
 """
 
-from .gcnn import GCNNController, gcnn, gcnn_batch
+from codesign.learned.gcnn import GCNNController, gcnn, gcnn_batch
 from .lqr import autonomous, decentralized, lqr
 from .polish import PolishResult, polish_gain
 from .qi import QIResult, is_quadratically_invariant

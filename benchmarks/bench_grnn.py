@@ -2,9 +2,9 @@
 
 Trains M GRNN models of the paper's size (N = 20, T = 50, batch 20, h = 5,
 validation curve every 10 steps on 100 draws) for a fixed number of steps with
-:func:`codesign.training.train_stack`, for M = 1 and M = 64 (or ``--models``),
+:func:`codesign.learned.grnn_bptt.train_grnn` (the one trainer with the GRNN model), for M = 1 and M = 64 (or ``--models``),
 with each engine (``torch``: one torch call per product and time step;
-``fused``: one compiled numba pass per model, :mod:`codesign.fused`), and
+``fused``: one compiled numba pass per model, :mod:`codesign.learned.fused`), and
 prints, measured in this one run:
 
 * seconds per 750-step model of each, per core, and the ratios;
@@ -41,8 +41,8 @@ import numpy as np
 import torch
 
 from codesign import paper_instance
-from codesign.grnn import _selection_set
-from codesign.training import ModelSpec, init_fwg, train_stack
+from codesign.learned.trainer import selection_set
+from codesign.learned.grnn_bptt import ModelSpec, init_fwg, train_grnn
 
 
 #: The timed run's settings (the paper's): the flop count and the kernel bound use the same.
@@ -57,7 +57,7 @@ def make_specs(M: int, instances) -> list[ModelSpec]:
         specs.append(ModelSpec(
             A=inst.A, B=inst.B, Q=inst.Q, R=inst.R, P=inst.P, trace_P=inst.trace_P,
             S0=inst.gso, mask=inst.comm_adj != 0, F0=F, W0=W, G0=G, data_seed=[m, 0],
-            curve_x0=_selection_set(inst, CURVE_SIZE), lr=0.02,
+            curve_x0=selection_set(inst, CURVE_SIZE), lr=0.02,
         ))
     return specs
 
@@ -67,11 +67,11 @@ def _train_share(args):
     torch.set_num_threads(threads)
     instances = [paper_instance(seed, n=n) for seed in range(min(M, 8))]
     specs = make_specs(M, instances)[offset:offset + count]
-    train_stack(specs[:2], steps=2, batch=BATCH, horizon=HORIZON, dtype=dtype, engine=engine)  # warm-up (allocator, BLAS, compiling)
+    train_grnn(specs[:2], steps=2, batch=BATCH, horizon=HORIZON, dtype=dtype, engine=engine)  # warm-up (allocator, BLAS, compiling)
     if barrier is not None:
         barrier.wait()
     start = time.perf_counter()
-    train_stack(specs, steps=steps, batch=BATCH, horizon=HORIZON, dtype=dtype, curve_every=CURVE_EVERY,
+    train_grnn(specs, steps=steps, batch=BATCH, horizon=HORIZON, dtype=dtype, curve_every=CURVE_EVERY,
                 engine=engine)
     return start, time.perf_counter()
 
@@ -99,7 +99,7 @@ def training_flops(N: int, steps: int = 750, curve_every: int = CURVE_EVERY, h: 
                    T: int = HORIZON, curve_size: int = CURVE_SIZE) -> float:
     """Floating-point operations of one model's training (one state and input per node, Q = R = I).
 
-    Counted from the products of :func:`codesign.training.grnn_loss_and_grad` (2 per
+    Counted from the products of :func:`codesign.learned.grnn_bptt.grnn_loss_and_grad` (2 per
     multiply-add), per time step of the forward pass (Z W, S (.), x F, Z G, x A', u B',
     the cost) and of the backward pass (lambda B, G du, dG, tanh', dF, dS, dPre S, dW,
     W dY, lambda A, F dPre); the validation curve rolls ``curve_size`` draws forward.
@@ -237,3 +237,4 @@ def main(argv=None) -> None:
 
 if __name__ == "__main__":
     main()
+

@@ -4,7 +4,8 @@ Public names::
 
     from codesign import paper_instance, Instance, Design
     from codesign import static_gain_cost, simulate, validation_set
-    from codesign import grnn, grnn_batch, GRNNController
+    from codesign import grnn, grnn_batch, GRNNController       # learned methods (codesign.learned)
+    from codesign import gcnn, gcnn_batch, GCNNController
     from codesign import method, score          # register your own method, score a controller
 """
 
@@ -33,7 +34,7 @@ from .evaluation import (
     static_gain_cost_and_grad,
     validation_set,
 )
-from .grnn import GRNNController, grnn, grnn_batch, grnn_defaults, paper_beta
+from .learned import GCNNController, GRNNController, gcnn, gcnn_batch, grnn, grnn_batch, grnn_defaults, paper_beta
 from .instances import Instance, InstanceError, hop_distances, paper_instance
 from .methods import Method, get_method, method, registered_methods
 from .scoring import evaluate, score
@@ -75,6 +76,9 @@ __all__ = [
     "grnn_batch",
     "grnn_defaults",
     "paper_beta",
+    "gcnn",
+    "gcnn_batch",
+    "GCNNController",
     "Method",
     "method",
     "get_method",

@@ -360,7 +360,7 @@ def training_curves_figure(records, ax=None, *, styles=None):
 
     The selection set is the fixed set of initial states on which a learned
     controller's cost is recorded during training and its ensemble member chosen
-    (``curve_size`` draws, see :mod:`codesign.grnn`), apart from the validation set
+    (``curve_size`` draws, see :mod:`codesign.learned.grnn`), apart from the validation set
     that scores the final design.
 
     Parameters

@@ -69,7 +69,7 @@ def _with_method(entry: str) -> str:
         ("grnn_sparse", {"beta": float("nan")}, "beta: must be a finite number >= 0, got nan"),
         ("gcnn", {"dtype": "float16"}, "dtype: expected 'float64' or 'float32', got str 'float16'"),
         ("gcnn", {"decay": 0.0}, "decay: must be a finite number in (0, 1], got 0.0"),
-        ("gcnn", {"curve_size": 0}, "curve_size: must be an integer >= 1, got 0"),
+        ("gcnn", {"curve_size": 0}, "curve_size: must be an integer >= 2, got 0"),
         ("sparse_admm", {"gammas": [-1, 0.1]}, "gammas[0]: must be a finite number >= 0, got -1"),
         ("sparse_admm", {"gammas": []}, "gammas: must be a non-empty list, got []"),
         ("sparse_admm", {"rho": 0}, "rho: must be a finite number > 0, got 0"),
@@ -116,33 +116,35 @@ def test_every_default_is_within_its_declared_bounds(name):
     method.check_params(method.defaults)
 
 
-def test_declared_bounds_agree_with_the_grnn_and_gcnn_checks():
-    """The bounds refuse in a spec exactly what the trainers' own checks refuse at run time."""
-    from baselines.gcnn import _DEFAULTS, _check
-    from codesign.grnn import _check_job, grnn_defaults
+@pytest.mark.parametrize("name, settings_type", [("grnn_sparse", "GRNNSettings"), ("gcnn", "GCNNSettings")])
+def test_the_learned_methods_settings_are_their_one_table(name, settings_type):
+    """A learned method's hyperparameters are its settings type's fields (one table), and the settings
+    type refuses what the registry refuses, with the same message."""
+    import dataclasses
 
-    inst = paper_instance(0, n=6, degree=4, horizon=8)
-    checked = []
-    for name, check, defaults in (
-        ("grnn_sparse", lambda s: _check_job(inst, "sparse", 1.0, 0, s), grnn_defaults()),
-        ("gcnn", lambda s: _check(inst, 0, {**_DEFAULTS, **s}), _DEFAULTS),
-    ):
-        method = get_method(name)
-        for key in defaults:
-            h = method.hyperparameters[key]
-            low = [c for c in getattr(h.annotation, "__metadata__", ()) if isinstance(c, AtLeast)]
-            if not low or not isinstance(h.default, int):
-                continue
-            edge = int(low[0].bound)
-            check({key: edge})  # accepted by both
-            method.check_params({key: edge})
-            with pytest.raises(ValueError):
-                check({key: edge - 1})
-            with pytest.raises(ValueError):
-                method.check_params({key: edge - 1})
-            checked.append(f"{name}.{key}")
-    assert {"grnn_sparse.steps", "grnn_sparse.curve_size", "grnn_sparse.curve_every", "gcnn.decay_every",
-            "gcnn.stability_steps"} <= set(checked)
+    import codesign.learned as learned
+
+    kind = getattr(learned, settings_type)
+    method = get_method(name)
+    fields = {f.name: f for f in dataclasses.fields(kind)}
+    assert set(method.hyperparameters) - set(fields) <= {"seed", "beta"}
+    checked = 0
+    for key, f in fields.items():
+        h = method.hyperparameters[key]
+        assert h.default == f.default and h.annotation == kind.hyperparameters()[key].annotation
+        low = [c for c in getattr(h.annotation, "__metadata__", ()) if isinstance(c, AtLeast)]
+        if not low or not isinstance(h.default, int):
+            continue
+        edge = int(low[0].bound)
+        kind(**{key: edge})
+        method.check_params({key: edge})
+        with pytest.raises(ValueError) as by_settings:
+            kind(**{key: edge - 1})
+        with pytest.raises(ValueError) as by_registry:
+            method.check_params({key: edge - 1}, where="")
+        assert str(by_registry.value) == "." + str(by_settings.value)
+        checked += 1
+    assert checked >= 5
 
 
 def test_compare_methods_shows_the_bounds():

@@ -47,7 +47,7 @@ def test_listing_methods_loads_no_heavy_package():
 
 
 def test_a_lazily_bound_torch_loads_on_first_use():
-    code = ("import codesign.training as t\n"
+    code = ("import codesign.learned.trainer as t\n"
             "assert type(sys.modules['torch']).__name__ == '_LazyModule'\n"
             "assert t.torch_dtype('float32') is t.torch.float32\n")
     assert _imported_after(code) == ["torch"]

@@ -11,9 +11,10 @@ import pytest
 import torch
 
 from codesign import Instance, grnn, paper_instance
-from codesign import fused
-from codesign.grnn import _selection_set
-from codesign.training import ModelSpec, _Problem, grnn_loss_and_grad, init_fwg, resolve_engine
+from codesign.learned import fused
+from codesign.learned.engines import resolve_engine
+from codesign.learned.trainer import selection_set
+from codesign.learned.grnn_bptt import ModelSpec, _Problem, grnn_loss_and_grad, init_fwg
 from compare.families.mass_spring import mass_spring_instance
 
 
@@ -59,7 +60,7 @@ def _specs(inst):
         F, W, G = init_fwg(np.random.default_rng([m, 3]), 5)
         out.append(ModelSpec(A=instance.A, B=instance.B, Q=instance.Q, R=instance.R, P=instance.P,
                              trace_P=instance.trace_P, S0=S0, mask=mask, F0=F, W0=W, G0=G, data_seed=m,
-                             curve_x0=_selection_set(instance, 10)))
+                             curve_x0=selection_set(instance, 10)))
     return out
 
 
@@ -126,10 +127,11 @@ def test_grnn_method_engines_agree_and_reject_what_they_cannot_run(inst):
     assert fused_design.status == torch_design.status == "optimal"
     np.testing.assert_allclose(fused_design.cost, torch_design.cost, rtol=1e-9)
     np.testing.assert_allclose(fused_design.extras["curve"]["cost"], torch_design.extras["curve"]["cost"], rtol=1e-9)
-    with pytest.raises(ValueError, match="engine must be one of"):
+    with pytest.raises(ValueError, match="engine: expected 'torch' or 'fused' or 'auto', got str 'gpu'"):
         grnn(inst, engine="gpu", steps=1)
     chain = mass_spring_instance(4, horizon=10)  # two states per node
     with pytest.raises(ValueError, match="engine 'fused' needs one state and one input per node"):
         grnn(chain, engine="fused", steps=1)
     auto = grnn(chain, engine="auto", steps=5, ensemble=1, stability_steps=10, curve_size=10)
     assert auto.status in ("optimal", "diverged")
+

@@ -15,13 +15,9 @@ from codesign import (
     paper_instance,
     simulate,
 )
-from codesign.grnn import GRNNController, LinearGRNNController, _selection_set
-from codesign.training import (
-    ModelSpec,
-    clip_coefficients,
-    init_fwg,
-    train_stack,
-)
+from codesign.learned.grnn import GRNNController, LinearGRNNController
+from codesign.learned.grnn_bptt import ModelSpec, init_fwg, train_grnn
+from codesign.learned.trainer import clip_coefficients, selection_set
 from references import assert_bptt_matches_autograd  # tests/references.py
 
 
@@ -40,7 +36,7 @@ def _spec(instance, m, *, mask=None, S0=None, lr=0.02, beta=0.0, penalty=(2.0, 2
     return ModelSpec(
         A=instance.A, B=instance.B, Q=instance.Q, R=instance.R, P=instance.P, trace_P=instance.trace_P,
         S0=instance.gso if S0 is None else S0, mask=instance.comm_adj != 0 if mask is None else mask,
-        F0=F, W0=W, G0=G, data_seed=[m, 0], curve_x0=_selection_set(instance, 10), lr=lr, beta=beta,
+        F0=F, W0=W, G0=G, data_seed=[m, 0], curve_x0=selection_set(instance, 10), lr=lr, beta=beta,
         penalty=penalty,
     )
 
@@ -64,11 +60,11 @@ def test_support_is_respected_exactly(inst, engine):
     n = inst.n
     given = _spec(inst, 0)
     frozen = _spec(inst, 1, mask=np.zeros((n, n), bool))
-    results = train_stack([given, frozen], steps=15, curve_every=5, engine=engine)
+    results = train_grnn([given, frozen], steps=15, curve_every=5, engine=engine)
     off = inst.comm_adj == 0
-    assert np.all(results[0].S[off] == 0.0)
-    assert np.any(results[0].S[~off] != inst.gso[~off])  # the support did train
-    np.testing.assert_array_equal(results[1].S, inst.gso)
+    assert np.all(results[0].params["S"][off] == 0.0)
+    assert np.any(results[0].params["S"][~off] != inst.gso[~off])  # the support did train
+    np.testing.assert_array_equal(results[1].params["S"], inst.gso)
 
 
 @pytest.mark.parametrize("engine", ["torch", "fused"])
@@ -77,11 +73,11 @@ def test_stacked_run_equals_single_runs(inst, unstable, engine):
     n = inst.n
     specs = [_spec(inst, 0), _spec(unstable, 1, lr=0.03),
              _spec(inst, 2, S0=np.full((n, n), 1.0 / n), mask=np.ones((n, n), bool), beta=0.5)]
-    stacked = train_stack(specs, steps=12, curve_every=4, engine=engine)
+    stacked = train_grnn(specs, steps=12, curve_every=4, engine=engine)
     for spec, together in zip(specs, stacked):
-        alone = train_stack([spec], steps=12, curve_every=4, engine=engine)[0]
+        alone = train_grnn([spec], steps=12, curve_every=4, engine=engine)[0]
         for name in ("S", "F", "W", "G"):
-            np.testing.assert_allclose(getattr(together, name), getattr(alone, name), rtol=1e-9, atol=1e-12)
+            np.testing.assert_allclose(together.params[name], alone.params[name], rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(together.curve_cost, alone.curve_cost, rtol=1e-9)
 
 
@@ -93,8 +89,8 @@ def test_l1_stage_sparsifies_more_with_larger_beta(inst):
     betas = (0.0, 1.0, 10.0)
     specs = [_spec(inst, 0, S0=dense, mask=np.ones((n, n), bool), lr=0.03, beta=b, penalty=(2.0, 2.0, 0.0, 0.0))
              for b in betas]
-    results = train_stack(specs, steps=60, curve_every=0)
-    small = [int(np.sum(np.abs(r.S) < 4e-3)) for r in results]
+    results = train_grnn(specs, steps=60, curve_every=0)
+    small = [int(np.sum(np.abs(r.params["S"]) < 4e-3)) for r in results]
     assert small[0] < small[1] < small[2], small
 
 
@@ -104,11 +100,11 @@ def test_diverging_model_is_flagged_and_others_continue(inst, engine):
     n = inst.n
     wild = Instance.from_matrices(1e4 * np.eye(n), np.eye(n), comm_adj=inst.comm_adj)
     specs = [_spec(inst, 0), _spec(wild, 1), _spec(inst, 2)]
-    results = train_stack(specs, steps=10, curve_every=5, engine=engine)
+    results = train_grnn(specs, steps=10, curve_every=5, engine=engine)
     assert [r.diverged for r in results] == [False, True, False]
     assert results[1].diverged_at == 0
-    alone = train_stack([specs[2]], steps=10, curve_every=5, engine=engine)[0]
-    np.testing.assert_allclose(results[2].S, alone.S, rtol=1e-9, atol=1e-12)
+    alone = train_grnn([specs[2]], steps=10, curve_every=5, engine=engine)[0]
+    np.testing.assert_allclose(results[2].params["S"], alone.params["S"], rtol=1e-9, atol=1e-12)
     assert all(np.isfinite(results[0].curve_cost))
 
 
@@ -274,5 +270,6 @@ def test_gradient_norm_is_finite_for_huge_float32_gradients():
 
 
 def test_unknown_activation_is_a_clear_error(inst):
-    with pytest.raises(ValueError, match="activation must be one of"):
+    with pytest.raises(ValueError, match="activation: expected 'tanh' or 'identity', got str 'relu'"):
         grnn(inst, activation="relu", steps=1)
+

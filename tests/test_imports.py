@@ -68,7 +68,7 @@ def import_graph() -> nx.DiGraph:
 def test_the_graph_is_read():
     graph = import_graph()
     assert graph.has_edge("compare.store", "compare.records")
-    assert graph.has_edge("codesign.training", "codesign.fused")  # a lazy import counts
+    assert graph.has_edge("codesign.learned.grnn_bptt", "codesign.learned.fused")  # a lazy import counts
     assert len(graph) > 50
 
 

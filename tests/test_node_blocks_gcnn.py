@@ -14,12 +14,13 @@ from codesign import Instance, controller_from_arrays, get_method, paper_instanc
 from codesign.design import count_links
 from codesign.evaluation import validation_set
 from compare.families.mass_spring import mass_spring_instance
+from references import gcnn_block_cost_autograd  # tests/references.py
 
 FAST = dict(steps=20, ensemble=1, stability_steps=0, curve_size=20)
 
 
 def gm():
-    return sys.modules["baselines.gcnn"]
+    return sys.modules["codesign.learned.gcnn_bptt"]
 
 
 @pytest.fixture(scope="module")
@@ -165,9 +166,9 @@ def test_general_formula_reduces_to_the_scalar_one():
     np.testing.assert_allclose(general.step(None, x)[0], scalar.step(None, x)[0], rtol=0, atol=1e-13)
     np.testing.assert_allclose(general.linear_gain(), scalar.linear_gain(), rtol=0, atol=1e-14)
     # The initialization draws the same numbers in both shapes.
-    Hs, ws = gm()._init(np.random.default_rng([0, 0, 22]), 5, 32)
+    Hs, ws = gm().gcnn_init(np.random.default_rng([0, 0, 22]), 5, 32)
     assert Hs.shape == (5, 1, 32) and ws.shape == (32, 1)
-    Hg, wg = gm()._init(np.random.default_rng([0, 0, 22]), 5, 32, 1, 1)
+    Hg, wg = gm().gcnn_init(np.random.default_rng([0, 0, 22]), 5, 32, 1, 1)
     np.testing.assert_array_equal(Hs, Hg)
     np.testing.assert_array_equal(ws, wg)
     legacy = np.random.default_rng([0, 0, 22])
@@ -194,7 +195,7 @@ def test_block_loss_reduces_to_the_hand_written_one():
     loss, (dH, dw) = gm()._loss_and_grad(S, H, w, A_t, B_t, P, x0, 12)
     Hl = H.unsqueeze(2).clone().requires_grad_(True)
     wl = w.unsqueeze(2).clone().requires_grad_(True)
-    J = gm()._block_cost(S, Hl, wl, E, E, A_t, B_t, Q, Q, P, x0, 12) / 7
+    J = gcnn_block_cost_autograd(S, Hl, wl, E, E, A_t, B_t, Q, Q, P, x0, 12) / 7
     J.sum().backward()
     np.testing.assert_allclose(J.detach().numpy(), loss.numpy(), rtol=1e-12)
     np.testing.assert_allclose(Hl.grad[:, :, 0].numpy(), dH.numpy(), rtol=0, atol=1e-11 * dH.abs().max().item())
@@ -234,15 +235,15 @@ def test_block_bptt_matches_autograd(chain, uneven):
     S = stack([i.gso for i in insts])
     A_t, B_t = stack([i.A.T for i in insts]), stack([i.B.T for i in insts])
     Q, R, P = (stack([getattr(i, k) for i in insts]) for k in "QRP")
-    Ex = stack([gm()._scatter(i.state_nodes, N, p) for i in insts])
-    Eu = stack([gm()._scatter(i.input_nodes, N, q).T for i in insts])
-    L = stack([gm()._tap_map(i.gso, i.state_nodes, 5, p) for i in insts])
+    Ex = stack([gm().scatter(i.state_nodes, N, p) for i in insts])
+    Eu = stack([gm().scatter(i.input_nodes, N, q).T for i in insts])
+    L = stack([gm().tap_map(i.gso, i.state_nodes, 5, p) for i in insts])
     H = torch.tensor(rng.standard_normal((2, 5, p, 32)) / 3)
     w = torch.tensor(rng.standard_normal((2, 32, q)) / 6)
     x0 = torch.tensor(rng.standard_normal((2, 7, inst.n)))
     T = 12
     Hl, wl = H.clone().requires_grad_(True), w.clone().requires_grad_(True)
-    reference = gm()._block_cost(S, Hl, wl, Ex, Eu, A_t, B_t, Q, R, P, x0, T) / 7
+    reference = gcnn_block_cost_autograd(S, Hl, wl, Ex, Eu, A_t, B_t, Q, R, P, x0, T) / 7
     reference.sum().backward()
     loss, (dH, dw) = gm()._block_loss_and_grad(L, H, w, Eu, A_t, B_t, Q, R, P, x0, T)
     np.testing.assert_allclose(loss.numpy(), reference.detach().numpy(), rtol=1e-12)

@@ -7,8 +7,9 @@ import pytest
 
 from codesign import Instance, compare_exact_and_simulated, controller_from_arrays, count_links, get_method
 from codesign.evaluation import impulse_responses
-from codesign.grnn import GRNNController, LinearGRNNController, _padded_problem, _selection_set
-from codesign.training import ModelSpec, init_fwg, train_stack
+from codesign.learned.grnn import GRNNController, LinearGRNNController, _padded_problem
+from codesign.learned.trainer import selection_set
+from codesign.learned.grnn_bptt import ModelSpec, init_fwg, train_grnn
 from compare.families.mass_spring import mass_spring_instance
 from references import assert_bptt_matches_autograd  # tests/references.py
 
@@ -38,7 +39,7 @@ def _spec(instance, m, **kw):
     F, W, G = init_fwg(np.random.default_rng([m, 7]), 4, padded["p"], padded["q"])
     return ModelSpec(A=padded["A"], B=padded["B"], Q=padded["Q"], R=padded["R"], P=padded["P"],
                      trace_P=instance.trace_P, S0=instance.gso, mask=instance.comm_adj != 0, F0=F, W0=W, G0=G,
-                     data_seed=[m, 0], curve_x0=padded["embed"](_selection_set(instance, 10)),
+                     data_seed=[m, 0], curve_x0=padded["embed"](selection_set(instance, 10)),
                      state_index=padded["state_index"], **kw)
 
 
@@ -55,11 +56,11 @@ def test_bptt_matches_autograd_on_uneven_blocks(uneven, activation):
 
 def test_training_draws_leave_the_padding_at_zero(uneven):
     """The trainer's loss equals the unpadded plant's cost of the controller it trains (padding inert)."""
-    (result,) = train_stack([_spec(uneven, 0)], steps=3, batch=4, horizon=uneven.horizon, curve_every=1)
-    controller = GRNNController(result.S, result.F, result.W, result.G, uneven.state_nodes, uneven.input_nodes)
+    (result,) = train_grnn([_spec(uneven, 0)], steps=3, batch=4, horizon=uneven.horizon, curve_every=1)
+    controller = GRNNController(**result.params, state_nodes=uneven.state_nodes, input_nodes=uneven.input_nodes)
     from codesign import simulate
 
-    x0 = _selection_set(uneven, 10)
+    x0 = selection_set(uneven, 10)
     rollout = simulate(uneven, controller, x0, control_variates=False)
     np.testing.assert_allclose(rollout.plain_cost, result.curve_cost[-1], rtol=1e-10)
 
@@ -117,3 +118,4 @@ def test_linear_grnn_on_blocks_is_scored_exactly(chain):
     check = compare_exact_and_simulated(chain, design.controller)
     assert abs(check["z"]) < 3
     np.testing.assert_allclose(check["control_variate"], design.cost, rtol=1e-9)
+

@@ -8,37 +8,42 @@ With ``activation="identity"`` the same parameterization is a linear dynamic
 controller (:class:`LinearGRNNController`) whose cost has a closed form.
 
 Entry points: :func:`grnn` (one instance, one variant) and :func:`grnn_batch`
-(many (instance, settings) jobs trained together as one stack of models by
-:func:`codesign.training.train_stack`).
+(many (instance, settings) jobs trained together in stacks of models by the one
+trainer, :mod:`codesign.learned.trainer`; the model is
+:class:`codesign.learned.grnn_bptt.GRNNStack`). :class:`GRNNSettings` is the one
+table of the training settings and their bounds.
 """
 
 from __future__ import annotations
 
-import time
+import dataclasses
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
 import numpy as np
 
-from .controllers import register_controller
-from .design import Design, count_links
-from .status import DIVERGED, OPTIMAL
-from .instances import node_ranks, node_width
-from .evaluation import (exact_cost, impulse_responses, simulate, simulate_to_precision, spectral_radius,
-                         validation_set)
-from .methods import Above, AtLeast, method
-from ._lazy import lazy_import
-from .training import ACTIVATIONS, DTYPES, ModelSpec, _tanh_, init_fwg, resolve_engine, train_stack
+from .._lazy import lazy_import
+from ..controllers import register_controller
+from ..design import Design, count_links
+from ..evaluation import exact_cost, impulse_responses, spectral_radius
+from ..instances import node_ranks, node_width
+from ..methods import Above, AtLeast, Hyperparameter, method
+from ..status import DIVERGED, OPTIMAL
+from .engines import ENGINES, resolve_engine
+from .grnn_bptt import ACTIVATIONS, GRNNStack, ModelSpec, init_fwg
+from .settings import TrainingSettings, takes_settings
+from .trainer import (Loop, TrainingJob, best_member, curve, diverged_members_message, selection_costs,
+                      selection_set, simulated_design, tanh_, train_jobs)
 
 torch = lazy_import("torch")
 
-__all__ = ["GRNNController", "LinearGRNNController", "grnn", "grnn_batch", "VARIANTS", "ACTIVATIONS",
-           "grnn_defaults", "paper_beta", "PAPER_BETA"]
+__all__ = ["GRNNController", "LinearGRNNController", "GRNNSettings", "grnn", "grnn_batch", "VARIANTS",
+           "ACTIVATIONS", "grnn_defaults", "paper_beta", "PAPER_BETA"]
 
 VARIANTS = ("given", "dense", "fixed", "sparse")
 
 #: Salts that keep the random streams of one (instance, seed) apart.
-_DATA, _INIT, _DENSE_S, _REFINE, _SELECT = 11, 12, 13, 14, 0xC0DE
+_DATA, _INIT, _DENSE_S, _REFINE = 11, 12, 13, 14
 
 
 def _slot_index(owners, nodes: int) -> tuple[np.ndarray, int]:
@@ -147,7 +152,7 @@ class GRNNController:
         Z = self._pre_activation(state, x)
         # tanh as 2 sigmoid(2 z) - 1 through torch (shared memory, in place): numpy's float64
         # tanh takes most of a rollout; this is several times faster and within 4e-16 of it.
-        _tanh_(torch.from_numpy(Z))
+        tanh_(torch.from_numpy(Z))
         return self._output(Z), Z
 
     def arrays(self) -> dict:
@@ -217,13 +222,61 @@ class LinearGRNNController(GRNNController):
         return impulse_responses(instance, self, steps)
 
 
+@dataclass(frozen=True)
+class GRNNSettings(TrainingSettings):
+    """The GRNN's training settings (the paper code's values): :class:`TrainingSettings` and these.
+
+    Attributes
+    ----------
+    hidden : int
+        Hidden size h of each node's state.
+    lr : float
+        Learning rate (of the refinement, for ``sparse``).
+    l1_lr : float
+        Learning rate of the ``sparse`` variant's l1 stage (0.03 in the paper's code).
+    clip : float
+        Gradient-norm clip per model (0 disables it).
+    frob : float
+        Weight of the plain Frobenius norms of S, F, G in the loss (W is not penalized).
+    refine_ensemble : int
+        Refinement runs of the ``sparse`` variant (the paper code used one).
+    threshold : float
+        Entries of the l1 stage's S below this magnitude are cut (the paper's 0.004).
+    activation : {"tanh", "identity"}
+        σ in Z(t+1) = σ(S Z(t) W + x(t) F): the paper's tanh, or the identity (the
+        linear GRNN: a linear dynamic controller with the same parameterization,
+        information model and training, scored exactly with ``cost_kind="exact"``;
+        ``bounded`` is then whether its closed loop's spectral radius is below 1).
+    engine : {"torch", "fused", "auto"}
+        How the loss and its gradient are computed: one torch call per product
+        and time step, or one compiled pass per model (numba), 2-3x as fast,
+        needing one state and one input per node; "auto" takes "fused" where it
+        applies and is faster (not for an S over half full at more than 32
+        nodes). The engines agree to rounding at every step; over a 750-step run
+        that can grow to 1e-4 or so in the final cost.
+    """
+
+    hidden: Annotated[int, AtLeast(1)] = 5
+    lr: Annotated[float, Above(0)] = 0.02
+    l1_lr: Annotated[float, Above(0)] = 0.03
+    clip: Annotated[float, AtLeast(0)] = 10.0
+    frob: Annotated[float, AtLeast(0)] = 2.0
+    refine_ensemble: Annotated[int, AtLeast(1)] = 1
+    threshold: Annotated[float, AtLeast(0)] = 4e-3
+    activation: Literal[ACTIVATIONS] = "tanh"
+    engine: Literal[ENGINES] = "torch"
+
+    def loop(self, horizon: int) -> Loop:
+        return Loop(steps=self.steps, batch=self.batch, horizon=horizon, clip=self.clip,
+                    curve_every=self.curve_every, dtype=self.dtype)
+
+
 def grnn_defaults() -> dict:
     """The paper code's training settings (docs/methods.md), by name."""
-    return dict(
-        steps=750, batch=20, hidden=5, lr=0.02, l1_lr=0.03, clip=10.0, frob=2.0,
-        ensemble=2, refine_ensemble=1, threshold=4e-3, curve_every=10, curve_size=100,
-        dtype="float64", stability_steps=500, stability_size=100, activation="tanh", engine="torch",
-    )
+    return dataclasses.asdict(GRNNSettings())
+
+
+_SEED = Hyperparameter("seed", 0, Annotated[int, AtLeast(0)])
 
 
 @dataclass
@@ -232,42 +285,35 @@ class _Job:
     variant: str
     beta: float | None
     seed: int
-    settings: dict
+    settings: GRNNSettings
     params: dict
 
 
-def _check_job(instance, variant, beta, seed, settings) -> dict:
+def _parse(instance, kwargs: dict) -> _Job:
+    """One run's keywords as a job; ValueError naming the first bad one, before any training."""
+    kwargs = dict(kwargs)
+    variant = kwargs.pop("variant", "given")
+    beta = kwargs.pop("beta", None)
+    seed = kwargs.pop("seed", 0)
     if variant not in VARIANTS:
         raise ValueError(f"variant must be one of {VARIANTS}, got {variant!r}")
     if variant == "sparse":
+        beta = paper_beta(instance) if beta is None else beta
         if not (isinstance(beta, (int, float, np.floating)) and np.isfinite(beta) and beta >= 0):
             raise ValueError(f"beta must be a finite non-negative number, got {beta!r}")
     elif beta is not None:
         raise ValueError(f"beta applies to variant 'sparse' only, got beta={beta!r} with variant {variant!r}")
-    unknown = set(settings) - set(grnn_defaults())
+    _SEED.check(seed, "seed")
+    unknown = set(kwargs) - set(grnn_defaults())
     if unknown:
         raise ValueError(f"unknown GRNN settings: {sorted(unknown)}; known: {sorted(grnn_defaults())}")
-    s = {**grnn_defaults(), **settings}
-    for key in ("steps", "batch", "hidden", "ensemble", "refine_ensemble", "curve_size", "stability_size"):
-        if isinstance(s[key], bool) or not isinstance(s[key], (int, np.integer)) or s[key] < 1:
-            raise ValueError(f"{key} must be a positive integer, got {s[key]!r}")
-    for key in ("lr", "l1_lr"):
-        if not s[key] > 0:
-            raise ValueError(f"{key} must be positive, got {s[key]!r}")
-    for key in ("clip", "frob", "threshold", "curve_every", "stability_steps"):
-        if s[key] is None or s[key] < 0:
-            raise ValueError(f"{key} must be non-negative, got {s[key]!r}")
-    if s["curve_size"] < 2:
-        raise ValueError(f"curve_size must be at least 2, got {s['curve_size']}")
-    if s["dtype"] not in DTYPES:
-        raise ValueError(f"dtype must be one of {sorted(DTYPES)}, got {s['dtype']!r}")
-    if s["activation"] not in ACTIVATIONS:
-        raise ValueError(f"activation must be one of {ACTIVATIONS}, got {s['activation']!r}")
-    resolve_engine(s["engine"], _slot_index(instance.state_nodes, instance.nodes)[1],
+    settings = GRNNSettings(**kwargs)
+    resolve_engine(settings.engine, _slot_index(instance.state_nodes, instance.nodes)[1],
                    _slot_index(instance.input_nodes, instance.nodes)[1])  # fails now, not after training
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    return s
+    params = {"variant": variant, "seed": int(seed), **dict(sorted(settings.changed().items()))}
+    if beta is not None:
+        params["beta"] = float(beta)
+    return _Job(instance, variant, None if beta is None else float(beta), int(seed), settings, params)
 
 
 #: The l1 weights the paper used for Table 1, by ||A||.
@@ -284,15 +330,6 @@ def paper_beta(instance) -> float:
         f"variant 'sparse' needs beta (the l1 weight); the paper's Table 1 values exist only for "
         f"a_norm in {sorted(PAPER_BETA)}, this instance has a_norm={a_norm!r}"
     )
-
-
-def _selection_set(instance, size: int) -> np.ndarray:
-    """Initial conditions for the training curve and ensemble selection.
-
-    Drawn apart from the reporting validation set so that picking the best
-    ensemble member does not bias the reported cost.
-    """
-    return np.random.default_rng([instance.seed, _SELECT]).standard_normal((size, instance.n))
 
 
 def _padded_problem(inst) -> dict:
@@ -317,11 +354,11 @@ def _padded_problem(inst) -> dict:
 def _spec(job: _Job, member: int, *, S0, mask, lr, beta, penalty, init_salt) -> ModelSpec:
     inst, s = job.instance, job.settings
     padded = _padded_problem(inst)
-    F, W, G = init_fwg(np.random.default_rng([job.seed, member, init_salt]), s["hidden"], padded["p"], padded["q"])
+    F, W, G = init_fwg(np.random.default_rng([job.seed, member, init_salt]), s.hidden, padded["p"], padded["q"])
     return ModelSpec(
         A=padded["A"], B=padded["B"], Q=padded["Q"], R=padded["R"], P=padded["P"], trace_P=inst.trace_P,
         S0=np.asarray(S0, dtype=float), mask=np.asarray(mask, dtype=bool), F0=F, W0=W, G0=G,
-        data_seed=[job.seed, member, _DATA], curve_x0=padded["embed"](_selection_set(inst, s["curve_size"])),
+        data_seed=[job.seed, member, _DATA], curve_x0=padded["embed"](selection_set(inst, s.curve_size)),
         lr=lr, beta=beta, penalty=penalty, state_index=padded["state_index"],
     )
 
@@ -334,76 +371,38 @@ def _dense_init(job: _Job, member: int) -> np.ndarray:
 
 def _first_stage_specs(job: _Job) -> list[ModelSpec]:
     inst, s = job.instance, job.settings
-    frob = s["frob"]
-    standard = (frob, frob, 0.0, frob)
+    standard = (s.frob, s.frob, 0.0, s.frob)
     n = inst.nodes
     specs = []
-    for member in range(s["ensemble"]):
+    for member in range(s.ensemble):
         if job.variant == "given":
             specs.append(_spec(job, member, S0=inst.gso, mask=inst.comm_adj != 0,
-                               lr=s["lr"], beta=0.0, penalty=standard, init_salt=_INIT))
+                               lr=s.lr, beta=0.0, penalty=standard, init_salt=_INIT))
         elif job.variant == "fixed":
             specs.append(_spec(job, member, S0=inst.gso, mask=np.zeros((n, n), bool),
-                               lr=s["lr"], beta=0.0, penalty=standard, init_salt=_INIT))
+                               lr=s.lr, beta=0.0, penalty=standard, init_salt=_INIT))
         elif job.variant == "dense":
-            specs.append(_spec(job, member, S0=_dense_init(job, member),
-                               mask=np.ones((n, n), bool), lr=s["lr"], beta=0.0, penalty=standard,
-                               init_salt=_INIT))
+            specs.append(_spec(job, member, S0=_dense_init(job, member), mask=np.ones((n, n), bool),
+                               lr=s.lr, beta=0.0, penalty=standard, init_salt=_INIT))
         else:  # l1 stage: the paper code's sparse_criterion penalizes ||S|| and ||F|| only
-            specs.append(_spec(job, member, S0=_dense_init(job, member),
-                               mask=np.ones((n, n), bool), lr=s["l1_lr"], beta=float(job.beta),
-                               penalty=(frob, frob, 0.0, 0.0), init_salt=_INIT))
+            specs.append(_spec(job, member, S0=_dense_init(job, member), mask=np.ones((n, n), bool),
+                               lr=s.l1_lr, beta=float(job.beta), penalty=(s.frob, s.frob, 0.0, 0.0),
+                               init_salt=_INIT))
     return specs
 
 
 def _refine_specs(job: _Job, S_l1: np.ndarray) -> list[ModelSpec]:
     s = job.settings
-    frob = s["frob"]
-    mask = np.abs(S_l1) >= s["threshold"]
-    return [
-        _spec(job, member, S0=np.where(mask, S_l1, 0.0), mask=mask, lr=s["lr"],
-              beta=0.0, penalty=(frob, frob, 0.0, frob), init_salt=_REFINE)
-        for member in range(s["refine_ensemble"])
-    ]
+    mask = np.abs(S_l1) >= s.threshold
+    return [_spec(job, member, S0=np.where(mask, S_l1, 0.0), mask=mask, lr=s.lr, beta=0.0,
+                  penalty=(s.frob, s.frob, 0.0, s.frob), init_salt=_REFINE)
+            for member in range(s.refine_ensemble)]
 
 
-def _train_groups(specs_by_job: list[list[ModelSpec]], jobs: list[_Job], stack_size: int):
-    """Train every spec, grouping jobs with the same loop settings into stacks."""
-    results: list[list] = [[None] * len(specs) for specs in specs_by_job]
-    seconds = [0.0] * len(jobs)
-    groups: dict[tuple, list[tuple[int, int]]] = {}
-    for j, (job, specs) in enumerate(zip(jobs, specs_by_job)):
-        s = job.settings
-        key = (s["steps"], s["batch"], job.instance.horizon, s["clip"], s["curve_every"], s["dtype"],
-               s["activation"], s["engine"], s["hidden"], s["curve_size"], job.instance.n, job.instance.m,
-               job.instance.nodes,
-               _slot_index(job.instance.state_nodes, job.instance.nodes)[1],
-               _slot_index(job.instance.input_nodes, job.instance.nodes)[1])
-        groups.setdefault(key, []).extend((j, k) for k in range(len(specs)))
-    for key, members in groups.items():
-        steps, batch, horizon, clip, curve_every, dtype, activation, engine = key[:8]
-        for start in range(0, len(members), stack_size):
-            chunk = members[start:start + stack_size]
-            t0 = time.perf_counter()
-            out = train_stack([specs_by_job[j][k] for j, k in chunk], steps=steps, batch=batch,
-                              horizon=horizon, clip=clip, curve_every=curve_every, dtype=dtype,
-                              activation=activation, engine=engine)
-            share = (time.perf_counter() - t0) / len(chunk)
-            for (j, k), result in zip(chunk, out):
-                results[j][k] = result
-                seconds[j] += share
-    return results, seconds
-
-
-def _best(results) -> int | None:
-    costs = [r.final_curve_cost if not r.diverged else np.inf for r in results]
-    costs = [c if np.isfinite(c) else np.inf for c in costs]
-    best = int(np.argmin(costs))
-    return None if not np.isfinite(costs[best]) else best
-
-
-def _curve(result) -> dict:
-    return {"step": list(result.curve_step), "cost": [float(c) for c in result.curve_cost]}
+def _training(job: _Job, specs: list[ModelSpec]) -> TrainingJob:
+    s = job.settings
+    return TrainingJob(GRNNStack, [spec.member() for spec in specs], s.loop(job.instance.horizon),
+                       options=(("activation", s.activation), ("engine", s.engine)))
 
 
 def grnn_batch(jobs, *, stack_size: int = 128) -> list[Design]:
@@ -413,51 +412,32 @@ def grnn_batch(jobs, *, stack_size: int = 128) -> list[Design]:
     ----------
     jobs : iterable of (Instance, dict)
         Each dict holds :func:`grnn`'s keyword arguments (``variant``, ``beta``,
-        ``seed`` and any setting of :func:`grnn_defaults`). Jobs with the same
+        ``seed`` and any field of :class:`GRNNSettings`). Jobs with the same
         loop settings (steps, batch, horizon, dtype, ...) share stacks of up to
         ``stack_size`` models: ensemble members, variants, instances and the
         sparse variant's l1 stage all train side by side, then all refinements.
     """
-    parsed: list[_Job] = []
-    for instance, kwargs in jobs:
-        kwargs = dict(kwargs)
-        variant = kwargs.pop("variant", "given")
-        beta = kwargs.pop("beta", None)
-        seed = kwargs.pop("seed", 0)
-        if variant == "sparse" and beta is None:
-            beta = paper_beta(instance)
-        settings = _check_job(instance, variant, beta, seed, kwargs)
-        defaults = grnn_defaults()
-        params = {"variant": variant, "seed": int(seed),
-                  **{k: settings[k] for k in sorted(kwargs) if settings[k] != defaults[k]}}
-        if beta is not None:
-            params["beta"] = float(beta)
-        parsed.append(_Job(instance, variant, None if beta is None else float(beta), int(seed), settings, params))
+    parsed = [_parse(instance, kwargs) for instance, kwargs in jobs]
     if not parsed:
         return []
+    first, seconds = train_jobs([_training(job, _first_stage_specs(job)) for job in parsed], stack_size=stack_size)
+    chosen = [best_member(results) for results in first]
 
-    first, seconds = _train_groups([_first_stage_specs(job) for job in parsed], parsed, stack_size)
-    chosen = [_best(results) for results in first]
-
-    refine_jobs = [j for j, job in enumerate(parsed) if job.variant == "sparse" and chosen[j] is not None]
-    l1_S = {j: first[j][chosen[j]].S for j in refine_jobs}
-    refined, refine_seconds = _train_groups([_refine_specs(parsed[j], l1_S[j]) for j in refine_jobs],
-                                            [parsed[j] for j in refine_jobs], stack_size)
-    refined_by_job = dict(zip(refine_jobs, refined))
-    for idx, j in enumerate(refine_jobs):
-        seconds[j] += refine_seconds[idx]
-
-    designs = []
-    for j, job in enumerate(parsed):
-        designs.append(_finish(job, first[j], chosen[j], refined_by_job.get(j), seconds[j]))
-    return designs
+    refine = [j for j, job in enumerate(parsed) if job.variant == "sparse" and chosen[j] is not None]
+    refined, refine_seconds = train_jobs(
+        [_training(parsed[j], _refine_specs(parsed[j], first[j][chosen[j]].params["S"])) for j in refine],
+        stack_size=stack_size)
+    refined_by_job = dict(zip(refine, refined))
+    for j, extra in zip(refine, refine_seconds):
+        seconds[j] += extra
+    return [_finish(job, first[j], chosen[j], refined_by_job.get(j), seconds[j]) for j, job in enumerate(parsed)]
 
 
 def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
     method = "grnn" if job.variant == "given" else f"grnn_{job.variant}"
     extras: dict = {
         "variant": job.variant,
-        "ensemble_curve_costs": [r.final_curve_cost for r in first],
+        "ensemble_curve_costs": selection_costs(first),
         "diverged_members": sum(r.diverged for r in first),
     }
     if chosen is None:
@@ -466,57 +446,27 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
                               info_model="delayed", seconds=seconds, extras=extras)
     result = first[chosen]
     if job.variant == "sparse":
-        l1 = result
-        extras["l1_curve"] = _curve(l1)
-        extras["l1_links"], extras["l1_self_loops"] = count_links(np.abs(l1.S) >= job.settings["threshold"])
-        best = _best(refined) if refined else None
-        extras["refine_curve_costs"] = [r.final_curve_cost for r in refined]
+        extras["l1_curve"] = curve(result)
+        extras["l1_links"], extras["l1_self_loops"] = count_links(np.abs(result.params["S"]) >= job.settings.threshold)
+        best = best_member(refined) if refined else None
+        extras["refine_curve_costs"] = selection_costs(refined)
         if best is None:
             return Design.failure(method, job.params, DIVERGED, "every refinement run diverged",
                                   info_model="delayed", seconds=seconds, extras=extras)
         result = refined[best]
-    linear = job.settings["activation"] == "identity"
+    linear = job.settings.activation == "identity"
     nodes = {} if job.instance.scalar_nodes else dict(state_nodes=job.instance.state_nodes,
                                                        input_nodes=job.instance.input_nodes)
-    controller = (LinearGRNNController if linear else GRNNController)(result.S, result.F, result.W, result.G,
-                                                                       **nodes)
+    controller = (LinearGRNNController if linear else GRNNController)(**result.params, **nodes)
     links, self_loops = count_links(controller.S)
-    extras["curve"] = _curve(result)
+    extras["curve"] = curve(result)
     extras["spectral_radius"] = spectral_radius(controller.linearized_closed_loop(job.instance))
     if linear:
         return _finish_linear(job, controller, first, links, self_loops, seconds, extras)
-    rollout = simulate_to_precision(job.instance, controller)
-    extras.update(rollout.summary())
-    steps = int(job.settings["stability_steps"])
-    if steps:
-        long = simulate(job.instance, controller, validation_set(job.instance)[:job.settings["stability_size"]],
-                        steps=steps)
-        extras["bounded"] = bool(long.bounded)
-        extras["max_state"] = float(long.max_state)
-        extras["stability_steps"] = steps
-    if not rollout.bounded or not np.isfinite(rollout.cost):
-        return Design.failure(method, job.params, DIVERGED,
-                              rollout.divergence or "the trained controller's validation rollout is unbounded",
-                              info_model="delayed", seconds=seconds, links=links, self_loops=self_loops,
-                              extras=extras)
-    message = ""
-    if extras["diverged_members"]:
-        message = f"{extras['diverged_members']} of {len(first)} ensemble members diverged"
-    return Design(
-        method=method,
-        params=job.params,
-        controller=controller,
-        cost=rollout.cost,
-        links=links,
-        self_loops=self_loops,
-        info_model="delayed",
-        status=OPTIMAL,
-        message=message,
-        seconds=seconds,
-        cost_stderr=rollout.stderr,
-        cost_kind="simulated",
-        extras=extras,
-    )
+    return simulated_design(job.instance, controller, method=method, params=job.params, info_model="delayed",
+                            links=links, self_loops=self_loops, seconds=seconds, extras=extras,
+                            stability_steps=job.settings.stability_steps,
+                            stability_size=job.settings.stability_size, message=diverged_members_message(first))
 
 
 def _finish_linear(job: _Job, controller, first, links, self_loops, seconds, extras) -> Design:
@@ -528,24 +478,15 @@ def _finish_linear(job: _Job, controller, first, links, self_loops, seconds, ext
         return Design.failure(method, job.params, DIVERGED, "the trained linear GRNN's exact cost is not finite",
                               info_model="delayed", seconds=seconds, links=links, self_loops=self_loops,
                               extras=extras)
-    diverged = extras["diverged_members"]
     return Design(method=method, params=job.params, controller=controller, cost=cost, links=links,
                   self_loops=self_loops, info_model="delayed", status=OPTIMAL,
-                  message=f"{diverged} of {len(first)} ensemble members diverged" if diverged else "",
-                  seconds=seconds, cost_stderr=0.0, cost_kind="exact", extras=extras)
+                  message=diverged_members_message(first), seconds=seconds, cost_stderr=0.0, cost_kind="exact",
+                  extras=extras)
 
 
+@takes_settings(GRNNSettings)
 def grnn(instance, *, variant: str = "given", beta: Annotated[float, AtLeast(0)] | None = None,
-         seed: Annotated[int, AtLeast(0)] = 0, steps: Annotated[int, AtLeast(1)] = 750,
-         batch: Annotated[int, AtLeast(1)] = 20, hidden: Annotated[int, AtLeast(1)] = 5,
-         lr: Annotated[float, Above(0)] = 0.02, l1_lr: Annotated[float, Above(0)] = 0.03,
-         clip: Annotated[float, AtLeast(0)] = 10.0, frob: Annotated[float, AtLeast(0)] = 2.0,
-         ensemble: Annotated[int, AtLeast(1)] = 2, refine_ensemble: Annotated[int, AtLeast(1)] = 1,
-         threshold: Annotated[float, AtLeast(0)] = 4e-3, curve_every: Annotated[int, AtLeast(0)] = 10,
-         curve_size: Annotated[int, AtLeast(2)] = 100, dtype: Literal["float64", "float32"] = "float64",
-         stability_steps: Annotated[int, AtLeast(0)] = 500, stability_size: Annotated[int, AtLeast(1)] = 100,
-         activation: Literal["tanh", "identity"] = "tanh",
-         engine: Literal["torch", "fused", "auto"] = "torch") -> Design:
+         seed: Annotated[int, AtLeast(0)] = 0, **settings) -> Design:
     """Train a GRNN distributed controller on ``instance`` (paper Sec. III).
 
     Parameters
@@ -566,49 +507,10 @@ def grnn(instance, *, variant: str = "given", beta: Annotated[float, AtLeast(0)]
     seed : int
         Seeds the training draws and initializations (member k of the ensemble
         uses streams derived from (seed, k)).
-    steps : int
-        Adam updates, with the learning rate cosine-annealed to 0 over them.
-    batch : int
-        Draws x(0) ~ N(0, I) per update.
-    hidden : int
-        Hidden size h of each node's state.
-    lr : float
-        Learning rate (of the refinement, for ``sparse``).
-    l1_lr : float
-        Learning rate of the ``sparse`` variant's l1 stage (0.03 in the paper's code).
-    clip : float
-        Gradient-norm clip per model (0 disables it).
-    frob : float
-        Weight of the plain Frobenius norms of S, F, G in the loss (W is not penalized).
-    ensemble : int
-        Models trained per setting; the one with the lowest cost on a separate
-        ``curve_size``-draw selection set is kept (for ``sparse``: of the l1 stage).
-    refine_ensemble : int
-        Refinement runs of the ``sparse`` variant (the paper code used one).
-    threshold : float
-        Entries of the l1 stage's S below this magnitude are cut (the paper's 0.004).
-    curve_every : int
-        Record the selection-set cost every this many updates (0: only at the end).
-    curve_size : int
-        Draws of the selection set (training curve and ensemble selection), apart from the validation set.
-    dtype : {"float64", "float32"}
-        Training precision; float32 is 1.5-2x as fast (docs/performance.md).
-    stability_steps : int
-        Length of the boundedness check rollout (0 skips it).
-    stability_size : int
-        How many draws of the validation set the boundedness check starts from.
-    activation : {"tanh", "identity"}
-        σ in Z(t+1) = σ(S Z(t) W + x(t) F): the paper's tanh, or the identity (the
-        linear GRNN: a linear dynamic controller with the same parameterization,
-        information model and training, scored exactly with ``cost_kind="exact"``;
-        ``bounded`` is then whether its closed loop's spectral radius is below 1).
-    engine : {"torch", "fused", "auto"}
-        How the loss and its gradient are computed: one torch call per product
-        and time step, or one compiled pass per model (numba), 2-3x as fast,
-        needing one state and one input per node; "auto" takes "fused" where it
-        applies and is faster (not for an S over half full at more than 32
-        nodes). The engines agree to rounding at every step; over a 750-step run
-        that can grow to 1e-4 or so in the final cost.
+    **settings
+        Any field of :class:`GRNNSettings` (the learning rate is cosine-annealed
+        to 0 over the ``steps``; float32 is 1.5-2x as fast as float64,
+        docs/performance.md):
 
     Returns
     -------
@@ -621,11 +523,6 @@ def grnn(instance, *, variant: str = "given", beta: Annotated[float, AtLeast(0)]
         rollout stays ``bounded``. Links are the off-diagonal support of S,
         with one step of delay per hop (``info_model="delayed"``).
     """
-    settings = dict(steps=steps, batch=batch, hidden=hidden, lr=lr, l1_lr=l1_lr, clip=clip, frob=frob,
-                    ensemble=ensemble, refine_ensemble=refine_ensemble, threshold=threshold,
-                    curve_every=curve_every, curve_size=curve_size, dtype=dtype,
-                    stability_steps=stability_steps, stability_size=stability_size, activation=activation,
-                    engine=engine)
     return grnn_batch([(instance, {"variant": variant, "beta": beta, "seed": seed, **settings})])[0]
 
 

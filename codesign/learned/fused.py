@@ -1,6 +1,6 @@
 """The GRNN's loss and gradient as one compiled pass per model (numba): the ``fused`` engine.
 
-:mod:`codesign.training` advances a stack of models with one torch call per
+:mod:`codesign.learned.grnn_bptt` advances a stack of models with one torch call per
 product per time step, which leaves two costs no arrangement of torch calls
 removes: the Python overhead of ~40 calls per time step, and dense products with
 S even where the mask makes most of S zero. Here one compiled function runs a
@@ -48,6 +48,11 @@ class _NoAliasCompiler(numba.core.compiler.CompilerBase):
     def define_pipelines(self):
         self.state.flags.noalias = True
         return [numba.core.compiler.DefaultPassBuilder.define_nopython_pipeline(self.state)]
+
+
+#: The pipeline the kernels compile with; None: numba's default (public) one, which
+#: benchmarks/bench_fused_noalias.py measures against this.
+PIPELINE = _NoAliasCompiler
 
 
 # Reassociation lets reductions vectorize; no 'nnan'/'ninf': a diverging model must
@@ -218,7 +223,7 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
     COEF, CONSTS = _tanh_constants(dt)
     WIDE = dt == np.float64
 
-    @functools.partial(_jit, pipeline_class=_NoAliasCompiler)
+    @(functools.partial(_jit, pipeline_class=PIPELINE) if PIPELINE is not None else _jit)
     def kernel(x0, S, s_dense, F, W, G, Q, R, P, q_identity, r_identity, s_ptr, s_cols, s_rows,
                st_ptr, st_cols, st_rows, ab_ptr, ab_cols, ab_vals, abt_ptr, abt_cols, abt_vals, AB,
                ab_dense, g_rows, g_cols, g_count, J, dS, dF, dW, dG,

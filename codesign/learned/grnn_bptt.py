@@ -1,24 +1,20 @@
-"""Batched training of many independent GRNN controllers at once.
-
-A stack of M models (different instances, variants, regularization weights,
-ensemble members) is advanced together: every tensor carries a leading model
-axis, so each operation does M models' work and the per-operation overhead of
-torch is paid once per stack instead of once per model. The models never mix:
-each has its own data stream, Adam state, learning-rate schedule, gradient
-clipping, support mask and divergence flag, so a stacked run gives the same
-parameters as M separate runs with the same seeds.
+"""The GRNN as a model of the one trainer: its rollout and hand-written BPTT, on two engines.
 
 The gradient is a hand-written backward pass through time (BPTT) of
 
     Z(t+1) = σ(S Z(t) W + x(t) F),  u(t) = Z(t+1) G,  x(t+1) = A x(t) + B u(t),
 
 with σ = tanh (the paper's GRNN) or the identity (the linear GRNN, see
-:data:`ACTIVATIONS`; one activation per stack),
+:data:`ACTIVATIONS`; one activation per stack), checked against autograd in the
+tests (tests/references.py). Doing it by hand avoids autograd's graph
+bookkeeping and lets tanh be evaluated as ``2 sigmoid(2 x) - 1``
+(:func:`~codesign.learned.trainer.tanh_`), three times faster than ``torch.tanh``
+on CPU and equal to it within 4e-16.
 
-checked against autograd in the tests (:func:`loss_autograd`). Doing it by hand
-avoids autograd's graph bookkeeping and lets tanh be evaluated as
-``2 sigmoid(2 x) - 1``, which is three times faster than ``torch.tanh`` on CPU and
-equal to it within 4e-16.
+:class:`GRNNStack` is the :class:`~codesign.learned.trainer.StackModel` the
+trainer advances: the ``torch`` engine (one batched torch call per product and
+time step, any node layout) or the ``fused`` engine (one compiled numba pass per
+model, :mod:`codesign.learned.fused`).
 
 Tensor layout (model axis first, nodes next, so that ``S @`` is one batched
 matmul with no transposes): x, u ``(M, N, B)``; Z ``(M, N, B, h)``.
@@ -26,63 +22,28 @@ matmul with no transposes): x, u ``(M, N, B)``; Z ``(M, N, B, h)``.
 
 from __future__ import annotations
 
-import functools
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from ._lazy import lazy_import
-from .engines import ENGINES, FUSED_DENSE_NODES, FUSED_DENSE_S, resolve_engine, s_supports  # noqa: F401
+from .._lazy import lazy_import
+from .engines import ENGINES, resolve_engine, s_supports
+from .trainer import Loop, Member, StackModel, no_grad, tanh_, torch_dtype, train_stack
 
 torch = lazy_import("torch")
 #: Imported only when the fused engine runs (it loads numba), yet part of this code's fingerprint.
-FINGERPRINT_MODULES = ("codesign.fused",)
+FINGERPRINT_MODULES = ("codesign.learned.fused",)
 
-__all__ = [
-    "ModelSpec",
-    "TrainResult",
-    "train_stack",
-    "BatchedAdam",
-    "rollout_cost",
-    "loss_autograd",
-    "grnn_loss_and_grad",
-    "init_fwg",
-    "DTYPES",
-    "ACTIVATIONS",
-    "ENGINES",
-    "torch_dtype",
-    "no_grad",
-]
+__all__ = ["ModelSpec", "GRNNStack", "train_grnn", "rollout_cost", "grnn_loss_and_grad",
+           "init_fwg", "ACTIVATIONS", "ENGINES"]
 
-#: Floating-point types the trainers run in, by name.
-DTYPES = ("float32", "float64")
 #: The GRNN's activation σ: the paper's tanh, or the identity (a linear dynamic controller).
 ACTIVATIONS = ("tanh", "identity")
+
+
 def _check_activation(activation: str) -> None:
     if activation not in ACTIVATIONS:
         raise ValueError(f"activation must be one of {ACTIVATIONS}, got {activation!r}")
-
-
-def torch_dtype(name: str):
-    """The torch dtype called ``name`` (one of :data:`DTYPES`)."""
-    if name not in DTYPES:
-        raise ValueError(f"dtype must be one of {sorted(DTYPES)}, got {name!r}")
-    return getattr(torch, name)
-
-
-def no_grad(function):
-    """``torch.no_grad()`` as a decorator that does not load torch until the function runs."""
-    @functools.wraps(function)
-    def wrapper(*args, **kwargs):
-        with torch.no_grad():
-            return function(*args, **kwargs)
-    return wrapper
-
-
-def _tanh_(pre: torch.Tensor) -> torch.Tensor:
-    """In-place tanh(pre) as 2 sigmoid(2 pre) - 1 (fast on CPU, abs error < 4e-16)."""
-    return torch.sigmoid(pre.mul_(2.0), out=pre).mul_(2.0).sub_(1.0)
 
 
 def init_fwg(rng: np.random.Generator, hidden: int, states: int = 1, inputs: int = 1
@@ -154,78 +115,10 @@ class ModelSpec:
     penalty: tuple = (2.0, 2.0, 0.0, 2.0)
     state_index: np.ndarray | None = None
 
-
-@dataclass
-class TrainResult:
-    """Final parameters and history of one model of a stack."""
-
-    S: np.ndarray
-    F: np.ndarray
-    W: np.ndarray
-    G: np.ndarray
-    diverged_at: int | None  # the step whose loss or gradient was not finite; None if it trained to the end
-    curve_step: list = field(default_factory=list)
-    curve_cost: list = field(default_factory=list)
-    final_loss: float = float("nan")
-
-    @property
-    def diverged(self) -> bool:
-        """Whether training froze this model at a non-finite loss or gradient.
-
-        A training outcome, not a design status: the method decides what a
-        diverged member means for its design.
-        """
-        return self.diverged_at is not None
-
-    @property
-    def final_curve_cost(self) -> float:
-        return self.curve_cost[-1] if self.curve_cost else float("nan")
-
-
-class BatchedAdam:
-    """Adam (torch's formulas) over stacked parameters, one learning rate per model.
-
-    ``params`` is a list of tensors whose first axis is the model axis.
-    ``weight_decay`` is coupled L2 (added to the gradient, as torch.optim.Adam does).
-    """
-
-    def __init__(self, params, *, betas=(0.9, 0.999), eps=1e-8, weight_decay=0.0):
-        self.params = params
-        self.beta1, self.beta2 = betas
-        self.eps = eps
-        self.weight_decay = weight_decay
-        self.m = [torch.zeros_like(p) for p in params]
-        self.v = [torch.zeros_like(p) for p in params]
-        self.t = 0
-
-    def step(self, grads, lr: torch.Tensor) -> None:
-        """One update; ``lr`` has shape (M,) (0 freezes a model)."""
-        self.t += 1
-        bc1 = 1.0 - self.beta1**self.t
-        bc2 = 1.0 - self.beta2**self.t
-        for p, g, m, v in zip(self.params, grads, self.m, self.v):
-            if self.weight_decay:
-                g = g.add(p, alpha=self.weight_decay)
-            m.lerp_(g, 1.0 - self.beta1)
-            v.mul_(self.beta2).addcmul_(g, g, value=1.0 - self.beta2)
-            denom = (v.sqrt() / math.sqrt(bc2)).add_(self.eps)
-            step = (lr / bc1).view((-1,) + (1,) * (p.dim() - 1))
-            p.addcmul_(m / denom, step, value=-1.0)
-
-
-def clip_coefficients(grads, max_norm: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per-model total gradient norm and torch's clip_grad_norm_ coefficient.
-
-    The norm is taken of the gradients scaled by their largest entry, so that it
-    stays finite in float32 for gradients up to ~1e38 (a linear GRNN's first
-    steps on an unstable plant reach 1e22, whose square overflows).
-    """
-    flat = [g.reshape(g.shape[0], -1) for g in grads]
-    scale = torch.stack([f.abs().amax(1) for f in flat]).amax(0)
-    safe = torch.where(scale > 0, scale, torch.ones_like(scale)).unsqueeze(1)
-    norm = sum((f / safe).pow(2).sum(1) for f in flat).sqrt() * safe.squeeze(1)
-    coef = (max_norm / (norm + 1e-6)).clamp(max=1.0)
-    return norm, coef
+    def member(self) -> Member:
+        """This model as a member of a trainer's stack."""
+        return Member(problem=self, data_seed=self.data_seed, curve_x0=self.curve_x0, lr=self.lr,
+                      placement=self.state_index)
 
 
 class _Problem:
@@ -327,7 +220,7 @@ def _forward(prob, S, F, W, G, x0, horizon: int, ws: _Workspace, activation: str
         for c in range(first, p):
             Z.addcmul_(xs[:, c].unsqueeze(1), Fb[c])
         if squash:
-            _tanh_(Z)
+            tanh_(Z)
         u = U[t]
         if q == 1:
             torch.bmm(Gq, Z.view(M, h, BN), out=u.view(M, 1, BN))
@@ -470,34 +363,6 @@ def _penalized(cost, grads, params, penalty, beta):
     return loss, grads
 
 
-def loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon, activation="tanh"):
-    """The same per-model loss with torch.tanh, node-major and autograd-friendly (test reference).
-
-    ``x0`` has shape (M, B, p N) as in :func:`grnn_loss_and_grad`.
-    """
-    M, Bsz = x0.shape[:2]
-    N, p, q = _node_sizes(prob, S.shape[1])
-    h = W.shape[1]
-    x = x0.transpose(1, 2)  # (M, p N, B): states slot-major
-    F3, G3 = F.reshape(M, p, h), G.reshape(M, h, q)
-    Z = torch.zeros(M, N, Bsz, h, dtype=x0.dtype)
-    J = torch.zeros(M, dtype=x0.dtype)
-    _check_activation(activation)
-    sigma = torch.tanh if activation == "tanh" else (lambda pre: pre)
-    for _ in range(horizon):
-        SZ = torch.einsum("mij,mjbk->mibk", S, Z)
-        xin = torch.einsum("mcib,mck->mibk", x.reshape(M, p, N, Bsz), F3)
-        Z = sigma(torch.einsum("mibk,mkl->mibl", SZ, W) + xin)
-        u = torch.einsum("mibk,mkc->mcib", Z, G3).reshape(M, q * N, Bsz)
-        J = J + torch.einsum("mib,mij,mjb->m", x, prob.Q, x) + torch.einsum("mib,mij,mjb->m", u, prob.R, u)
-        x = torch.einsum("mij,mjb->mib", prob.A, x) + torch.einsum("mij,mjb->mib", prob.B, u)
-    J = J + torch.einsum("mib,mij,mjb->m", x, prob.P, x)
-    loss = J / Bsz + beta * S.abs().sum((1, 2))
-    for k, param in enumerate((S, F, W, G)):
-        loss = loss + penalty[:, k] * _norm(param)
-    return loss
-
-
 @no_grad
 def rollout_cost(prob, S, F, W, G, x0, horizon, ws=None, activation="tanh") -> torch.Tensor:
     """Mean normalized cost per model on the initial conditions x0 (M, B, p N)."""
@@ -509,148 +374,94 @@ def rollout_cost(prob, S, F, W, G, x0, horizon, ws=None, activation="tanh") -> t
     return J / Bsz / prob.trace_P
 
 
-def _cosine(k: int, steps: int) -> float:
-    return 0.5 * (1.0 + math.cos(math.pi * k / steps))
 
 
-@no_grad
-def train_stack(
-    specs: list[ModelSpec],
-    *,
-    steps: int = 750,
-    batch: int = 20,
-    horizon: int = 50,
-    clip: float = 10.0,
-    curve_every: int = 10,
-    dtype: str = "float64",
-    activation: str = "tanh",
-    engine: str = "torch",
-) -> list[TrainResult]:
-    """Train the models of ``specs`` together; one :class:`TrainResult` per spec.
+class GRNNStack(StackModel):
+    """A stack of GRNNs for :func:`~codesign.learned.trainer.train_stack`; members' problems are :class:`ModelSpec`.
 
-    Each model: Adam with its own learning rate cosine-annealed to zero over
-    ``steps`` updates, a fresh batch of ``batch`` draws x(0) ~ N(0, I) per update
-    from its own ``data_seed``, full BPTT over ``horizon`` steps, gradient-norm
-    clipping at ``clip`` (``None`` or 0 disables it). A model whose loss or
-    gradient stops being finite is frozen and reported ``diverged``; the others
-    go on. The validation curve (mean normalized cost on ``spec.curve_x0``) is
-    recorded every ``curve_every`` updates and after the last one. Every model of
-    the stack uses the same ``activation`` (one of :data:`ACTIVATIONS`) and ``engine``
-    (one of :data:`ENGINES`; the engines agree to rounding).
+    Options: ``activation`` (one of :data:`ACTIVATIONS`) and ``engine`` (one of
+    :data:`ENGINES`; the engines agree to rounding). S trains on its mask (an
+    all-False mask freezes it at S0; the others start on their support).
     """
-    tdt = torch_dtype(dtype)
-    _check_activation(activation)
-    if steps < 1 or batch < 1:
-        raise ValueError(f"steps and batch must be positive, got steps={steps}, batch={batch}")
-    M = len(specs)
-    if M == 0:
-        return []
-    N = specs[0].S0.shape[0]
-    prob = _Problem(specs, tdt)
-    _, p, q = _node_sizes(prob, N)
-    supports = s_supports(np.stack([s.S0 for s in specs]),
-                          np.stack([np.asarray(s.mask, dtype=bool) for s in specs]))
-    engine = resolve_engine(engine, p, q, nodes=N, support_density=supports.mean(axis=(1, 2)).max())
-    padded = p * N
-    placements = [np.arange(padded) if s.state_index is None else np.asarray(s.state_index) for s in specs]
-    if len({len(k) for k in placements}) != 1:
-        raise ValueError("every model of a stack needs the same number of states")
 
-    def stack(name):
-        return torch.tensor(np.stack([np.asarray(getattr(s, name), dtype=float) for s in specs]), dtype=tdt)
+    names = ("S", "F", "W", "G")
 
-    S, F, W, G = stack("S0"), stack("F0"), stack("W0"), stack("G0")
-    mask = torch.tensor(np.stack([np.asarray(s.mask, dtype=bool) for s in specs]))
-    maskf = mask.to(tdt)
-    # A model with an empty mask keeps S frozen at S0; the others start on their support.
-    frozen = ~mask.any(dim=(1, 2))
-    S.mul_(torch.where(frozen.view(M, 1, 1), torch.ones_like(maskf), maskf))
-    penalty = torch.tensor([s.penalty for s in specs], dtype=tdt)
-    beta = torch.tensor([s.beta for s in specs], dtype=tdt)
-    base_lr = torch.tensor([s.lr for s in specs], dtype=tdt)
-    alive = torch.ones(M, dtype=torch.bool)
-    diverged_at: list[int | None] = [None] * M
-    rngs = [np.random.default_rng(s.data_seed) for s in specs]
-    curve_x0 = torch.tensor(np.stack([np.asarray(s.curve_x0) for s in specs]), dtype=tdt)
-    params = [S, F, W, G]
-    adam = BatchedAdam(params)
-    curve_steps: list[int] = []
-    curve_costs: list[torch.Tensor] = []
-    last_loss = torch.full((M,), float("nan"), dtype=tdt)
+    def __init__(self, members, loop: Loop, *, activation: str = "tanh", engine: str = "torch"):
+        _check_activation(activation)
+        specs = [m.problem for m in members]
+        tdt = torch_dtype(loop.dtype)
+        M, N = len(specs), specs[0].S0.shape[0]
+        prob = _Problem(specs, tdt)
+        _, p, q = _node_sizes(prob, N)
+        masks = np.stack([np.asarray(s.mask, dtype=bool) for s in specs])
+        supports = s_supports(np.stack([s.S0 for s in specs]), masks)
+        engine = resolve_engine(engine, p, q, nodes=N, support_density=supports.mean(axis=(1, 2)).max())
+        self.dim = p * N
 
-    h = W.shape[1]
-    draws = np.zeros((M, batch, padded))
-    if engine == "fused":
-        from . import fused
+        def stack(name):
+            return torch.tensor(np.stack([np.asarray(getattr(s, name), dtype=float) for s in specs]), dtype=tdt)
 
-        compiled = fused.FusedStack(prob.A.numpy(), prob.B.numpy(), prob.Q.numpy(), prob.R.numpy(),
-                                    prob.P.numpy(), S.numpy(), mask.numpy(), hidden=h, horizon=horizon,
-                                    batch=batch, dtype=S.numpy().dtype, squash=activation == "tanh")
-        curve_nodes = np.ascontiguousarray(curve_x0.numpy().transpose(0, 2, 1))
-        arrays = [param.numpy() for param in params]  # views: Adam updates them in place
+        S, F, W, G = stack("S0"), stack("F0"), stack("W0"), stack("G0")
+        mask = torch.tensor(masks)
+        maskf = mask.to(tdt)
+        frozen = ~mask.any(dim=(1, 2))
+        S.mul_(torch.where(frozen.view(M, 1, 1), torch.ones_like(maskf), maskf))
+        self.params = [S, F, W, G]
+        penalty = torch.tensor([s.penalty for s in specs], dtype=tdt)
+        beta = torch.tensor([s.beta for s in specs], dtype=tdt)
+        h, horizon, batch = W.shape[1], loop.horizon, loop.batch
+        curve_size = np.shape(members[0].curve_x0)[0]
+        if engine == "fused":
+            from . import fused
 
-        def loss_and_grad(x0):
-            J, *grads = compiled.loss_and_grad(*arrays, np.ascontiguousarray(x0.numpy().transpose(0, 2, 1)))
-            return _penalized(torch.from_numpy(J) / batch, [torch.from_numpy(g) for g in grads], params,
-                              penalty, beta)
+            compiled = fused.FusedStack(prob.A.numpy(), prob.B.numpy(), prob.Q.numpy(), prob.R.numpy(),
+                                        prob.P.numpy(), S.numpy(), masks, hidden=h, horizon=horizon,
+                                        batch=batch, dtype=S.numpy().dtype, squash=activation == "tanh")
+            arrays = [param.numpy() for param in self.params]  # views: Adam updates them in place
 
-        def curve_cost():
-            return torch.from_numpy(compiled.costs(*arrays, curve_nodes)) / curve_x0.shape[1] / prob.trace_P
-    else:
-        ws_train = _Workspace(M, N, batch, h, horizon, tdt, keep=True, p=p, q=q)
-        ws_curve = _Workspace(M, N, curve_x0.shape[1], h, horizon, tdt, keep=False, p=p, q=q)
+            def loss_and_grad(x0):
+                J, *grads = compiled.loss_and_grad(*arrays, np.ascontiguousarray(x0.numpy().transpose(0, 2, 1)))
+                return _penalized(torch.from_numpy(J) / batch, [torch.from_numpy(g) for g in grads],
+                                  self.params, penalty, beta)
 
-        def loss_and_grad(x0):
-            return grnn_loss_and_grad(prob, S, F, W, G, x0, penalty=penalty, beta=beta, horizon=horizon,
-                                      ws=ws_train, activation=activation)
+            def curve_cost(x0):
+                nodes = np.ascontiguousarray(x0.numpy().transpose(0, 2, 1))
+                return torch.from_numpy(compiled.costs(*arrays, nodes)) / x0.shape[1] / prob.trace_P
+        else:
+            ws_train = _Workspace(M, N, batch, h, horizon, tdt, keep=True, p=p, q=q)
+            ws_curve = _Workspace(M, N, curve_size, h, horizon, tdt, keep=False, p=p, q=q)
 
-        def curve_cost():
-            return rollout_cost(prob, S, F, W, G, curve_x0, horizon, ws_curve, activation)
+            def loss_and_grad(x0):
+                return grnn_loss_and_grad(prob, S, F, W, G, x0, penalty=penalty, beta=beta, horizon=horizon,
+                                          ws=ws_train, activation=activation)
 
-    def record(k):
-        curve_steps.append(k)
-        curve_costs.append(curve_cost())
+            def curve_cost(x0):
+                return rollout_cost(prob, S, F, W, G, x0, horizon, ws_curve, activation)
 
-    for k in range(steps):
-        if curve_every and k % curve_every == 0:
-            record(k)
-        for m, (rng, where) in enumerate(zip(rngs, placements)):
-            draws[m][:, where] = rng.standard_normal((batch, len(where)))
-        x0 = torch.tensor(draws, dtype=tdt)
-        x0.mul_(alive.view(M, 1, 1).to(tdt))
-        loss, grads = loss_and_grad(x0)
-        grads[0].mul_(maskf)
-        norm, coef = clip_coefficients(grads, clip if clip else float("inf"))
-        bad = alive & ~(torch.isfinite(loss) & torch.isfinite(norm))
-        if bool(bad.any()):
-            for m in torch.nonzero(bad).flatten().tolist():
-                diverged_at[m] = k
-            alive &= ~bad
-            for p in params:  # a dead model rolls out zeros from now on
-                p.copy_(torch.where(alive.view((-1,) + (1,) * (p.dim() - 1)), p, torch.zeros_like(p)))
-            grads = [torch.nan_to_num(g, nan=0.0, posinf=0.0, neginf=0.0) for g in grads]
-            coef = torch.where(alive, torch.nan_to_num(coef, nan=0.0), torch.zeros_like(coef))
-        last_loss = torch.where(alive, loss, last_loss)
-        if clip:
-            for g in grads:
-                g.mul_(coef.view((-1,) + (1,) * (g.dim() - 1)))
-        lr = base_lr * _cosine(k, steps) * alive.to(tdt)
-        adam.step(grads, lr)  # masked gradients keep S exactly zero (or frozen) off the support
-    record(steps)
+        self._loss_and_grad, self._curve_cost, self._maskf = loss_and_grad, curve_cost, maskf
+        self.engine = engine
 
-    costs = torch.stack(curve_costs).numpy()  # (points, M)
-    results = []
-    for m in range(M):
-        results.append(
-            TrainResult(
-                S=S[m].numpy().astype(float),
-                F=F[m].numpy().astype(float),
-                W=W[m].numpy().astype(float),
-                G=G[m].numpy().astype(float),
-                diverged_at=diverged_at[m],
-                curve_step=list(curve_steps),
-                curve_cost=[float(c) for c in costs[:, m]],
-                final_loss=float(last_loss[m]),
-            )
-        )
-    return results
+    @classmethod
+    def shape_key(cls, member: Member) -> tuple:
+        s = member.problem
+        return member.shape_key() + tuple(np.shape(getattr(s, k)) for k in ("A", "B", "S0", "F0", "W0", "G0"))
+
+    def loss_and_grad(self, x0):
+        loss, grads = self._loss_and_grad(x0)
+        grads[0].mul_(self._maskf)  # masked gradients keep S exactly zero (or frozen) off the support
+        return loss, grads
+
+    def curve_cost(self, x0):
+        return self._curve_cost(x0)
+
+
+def train_grnn(specs: list[ModelSpec], *, steps: int = 750, batch: int = 20, horizon: int = 50,
+               clip: float = 10.0, curve_every: int = 10, dtype: str = "float64", activation: str = "tanh",
+               engine: str = "torch"):
+    """Train the GRNNs of ``specs`` as one stack (cosine schedule); one TrainResult per spec.
+
+    A convenience over :func:`~codesign.learned.trainer.train_stack` with
+    :class:`GRNNStack`, for tests and benchmarks that build specs by hand.
+    """
+    loop = Loop(steps=steps, batch=batch, horizon=horizon, clip=clip, curve_every=curve_every, dtype=dtype)
+    return train_stack(GRNNStack, [s.member() for s in specs], loop, activation=activation, engine=engine)

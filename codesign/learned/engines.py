@@ -1,6 +1,6 @@
 """Which engine trains a stack of GRNNs: torch's batched products or the fused numba pass.
 
-Both :mod:`codesign.training` (which dispatches) and :mod:`codesign.fused` (which
+Both :mod:`codesign.learned.grnn_bptt` (which dispatches) and :mod:`codesign.learned.fused` (which
 lays out a stack's supports) read these rules, so they live here, apart from both:
 importing them loads neither torch nor numba.
 """
@@ -12,9 +12,9 @@ import numpy as np
 __all__ = ["ENGINES", "FUSED_DENSE_S", "FUSED_DENSE_NODES", "s_supports", "resolve_engine"]
 
 #: How a stack's loss and gradient are computed: one torch call per product and time step
-#: (any node layout), or one compiled pass per model (:mod:`codesign.fused`, numba; one state
+#: (any node layout), or one compiled pass per model (:mod:`codesign.learned.fused`, numba; one state
 #: and one input per node); "auto" takes "fused" where it applies and is faster (resolve_engine).
-ENGINES = ("auto", "torch", "fused")
+ENGINES = ("torch", "fused", "auto")
 
 
 #: The fused engine multiplies by S dense where its support is more than this full, and only

@@ -24,13 +24,15 @@ row for the products with S. One state and one input per node only.
 from __future__ import annotations
 
 import functools
+import inspect
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
 from .engines import FUSED_DENSE_NODES, FUSED_DENSE_S, s_supports
 
-__all__ = ["FusedStack", "DENSE_S", "DENSE_AB"]
+__all__ = ["FusedStack", "Plan", "Workspace", "DENSE_S", "DENSE_AB"]
 
 #: Enter the code fingerprint of every method that trains through this module.
 FINGERPRINT_PACKAGES = ("numba", "llvmlite")
@@ -38,6 +40,9 @@ FINGERPRINT_PACKAGES = ("numba", "llvmlite")
 
 class _NoAliasCompiler(numba.core.compiler.CompilerBase):
     """numba's nopython pipeline with the kernel's array arguments marked noalias.
+
+    numba's non-public API: benchmarks/bench_fused_noalias.py measures it worth 12-24 %
+    of a pass, so it stays and pyproject.toml pins numba to the versions tested with it.
 
     Without it LLVM must assume any two arrays may overlap and guards every
     vectorized loop with run-time overlap checks: 15 % of the kernel's time at
@@ -223,19 +228,24 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
     COEF, CONSTS = _tanh_constants(dt)
     WIDE = dt == np.float64
 
+    # Every array is an argument of its own, so that the noalias pipeline marks each one: arrays
+    # passed inside a tuple, or through a wrapper that LLVM inlines, lose most of it (10.8-11.0
+    # against 9.45 ms a pass). Callers pass the named structures spread, in the order _ARGUMENTS
+    # checks against this signature.
     @(functools.partial(_jit, pipeline_class=PIPELINE) if PIPELINE is not None else _jit)
-    def kernel(x0, S, s_dense, F, W, G, Q, R, P, q_identity, r_identity, s_ptr, s_cols, s_rows,
-               st_ptr, st_cols, st_rows, ab_ptr, ab_cols, ab_vals, abt_ptr, abt_cols, abt_vals, AB,
-               ab_dense, g_rows, g_cols, g_count, J, dS, dF, dW, dG,
-               Zs, XU, Y, dZ, dY, dPre, lam, tmp, tmp2, s_vals, st_vals, aF, aG, aW):
+    def kernel(x0, S, F, W, G, J, dS, dF, dW, dG, s_dense, Q, R, P, q_identity, r_identity, s_ptr, s_cols,
+               s_rows, st_ptr, st_cols, st_rows, ab_ptr, ab_cols, ab_vals, abt_ptr, abt_cols, abt_vals, AB,
+               ab_dense, g_rows, g_cols, g_count, Zs, XU, Y, dZ, dY, dPre, lam, tmp, tmp2, s_vals, st_vals,
+               aF, aG, aW):
         """Summed cost J of every model of the stack and, with ``backward``, its unpenalized
-        gradients (dS on the mask only).
+        gradients dS (on the mask only), dF, dW, dG.
 
-        x0 (M, N, B); Zs (T or 2, N, h B); XU (T + 1, 2N, B): x(t) in rows :N, u(t) in
-        rows N:; Y, dZ, dY, dPre (N, h B); lam, tmp (N, B); tmp2 (2N, B); aF, aG (h, B);
-        aW (h h, B). S is multiplied dense where s_dense[m],
-        else on the padded row patterns s_* (st_*: of S'); [A B] on ab_*, its transpose
-        dense (AB) when ab_dense, else on abt_*. g_*: the mask's entries (dS).
+        x0 (M, N, B); then the fields of a :class:`Plan` (the stack's fixed patterns and costs) and of a
+        :class:`Workspace` (buffers): Zs (T or 2, N, h B); XU (T + 1, 2N, B): x(t) in rows
+        :N, u(t) in rows N:; Y, dZ, dY, dPre (N, h B); lam, tmp (N, B); tmp2 (2N, B); aF, aG
+        (h, B); aW (h h, B). S is multiplied dense where s_dense[m], else on the padded row
+        patterns s_* (st_*: of S'); [A B] on ab_*, its transpose dense (AB) when ab_dense,
+        else on abt_*. g_*: the mask's entries (dS).
         """
         for m in range(x0.shape[0]):
             Sm, Fm, Wm, Gm = S[m], F[m], W[m], G[m]
@@ -376,7 +386,67 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
                 for k in range(h):
                     dW[m, k, l] = aW[k * h + l].sum()
 
+    names = tuple(inspect.signature(kernel.py_func).parameters)
+    if names != _ARGUMENTS:  # the structures' order is the kernel's, checked rather than trusted
+        raise RuntimeError(f"fused kernel arguments {names} differ from the structures' {_ARGUMENTS}")
     return kernel
+
+
+class Plan(NamedTuple):
+    """What the kernel needs of a stack besides its parameters, fixed for the run (one field per array).
+
+    s_dense (M,) bool: S multiplied dense; Q, R, P (M, N, N) and whether Q, R are the identity;
+    s_ptr, s_cols, s_rows and st_*: the padded row patterns of S's support and of its
+    transpose; ab_* and abt_*: of [A B] and its transpose, with their values; AB (M, N, 2N) and
+    ab_dense: [A B] for the dense transposed product; g_rows, g_cols, g_count: the mask's entries.
+    """
+
+    s_dense: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+    P: np.ndarray
+    q_identity: bool
+    r_identity: bool
+    s_ptr: np.ndarray
+    s_cols: np.ndarray
+    s_rows: np.ndarray
+    st_ptr: np.ndarray
+    st_cols: np.ndarray
+    st_rows: np.ndarray
+    ab_ptr: np.ndarray
+    ab_cols: np.ndarray
+    ab_vals: np.ndarray
+    abt_ptr: np.ndarray
+    abt_cols: np.ndarray
+    abt_vals: np.ndarray
+    AB: np.ndarray
+    ab_dense: bool
+    g_rows: np.ndarray
+    g_cols: np.ndarray
+    g_count: np.ndarray
+
+
+class Workspace(NamedTuple):
+    """The kernel's buffers for one batch size (shapes in the kernel's docstring), reused across calls."""
+
+    Zs: np.ndarray
+    XU: np.ndarray
+    Y: np.ndarray
+    dZ: np.ndarray
+    dY: np.ndarray
+    dPre: np.ndarray
+    lam: np.ndarray
+    tmp: np.ndarray
+    tmp2: np.ndarray
+    s_vals: np.ndarray
+    st_vals: np.ndarray
+    aF: np.ndarray
+    aG: np.ndarray
+    aW: np.ndarray
+
+
+#: The kernel's arguments, in order: the stack's parameters and outputs, then the structures' fields.
+_ARGUMENTS = ("x0", "S", "F", "W", "G", "J", "dS", "dF", "dW", "dG") + Plan._fields + Workspace._fields
 
 
 def _padded_rows(patterns: np.ndarray, values: np.ndarray | None = None):
@@ -427,41 +497,36 @@ class FusedStack:
         trainable = mask.any(axis=(1, 2))
         support = s_supports(S0, mask)
         # Dense products beat the pattern above about half full (and unroll only for small N).
-        self.s_dense = (support.mean(axis=(1, 2)) > DENSE_S) & (N <= FUSED_DENSE_NODES)
-        self.s_ptr, self.s_cols, self.s_rows = _padded_rows(support)
-        self.st_ptr, self.st_cols, self.st_rows = _padded_rows(support.transpose(0, 2, 1))
-        AB = np.concatenate([A, B], axis=2).astype(dt)
-        ptr, cols, _, vals = _padded_rows(AB != 0, AB)
-        self.ab = (ptr, cols, vals)
-        # The transposed product runs faster dense than by pattern unless [A B] is sparse.
-        self.AB, self.ab_dense = np.ascontiguousarray(AB), bool(np.mean(AB != 0) > DENSE_AB)
+        s_dense = (support.mean(axis=(1, 2)) > DENSE_S) & (N <= FUSED_DENSE_NODES)
+        AB = np.ascontiguousarray(np.concatenate([A, B], axis=2).astype(dt))
+        ab_ptr, ab_cols, _, ab_vals = _padded_rows(AB != 0, AB)
         ABt = np.ascontiguousarray(AB.transpose(0, 2, 1))
-        pt = _padded_rows(ABt != 0, ABt)
-        self.abt = (pt[0], pt[1], pt[3])
-        g_count = np.where(trainable, mask.sum(axis=(1, 2)), 0)
-        self.g_rows = np.zeros((M, max(g_count.max(), 1)), np.int64)
-        self.g_cols = np.zeros_like(self.g_rows)
+        abt_ptr, abt_cols, _, abt_vals = _padded_rows(ABt != 0, ABt)
+        g_count = np.where(trainable, mask.sum(axis=(1, 2)), 0).astype(np.int64)
+        g_rows = np.zeros((M, max(g_count.max(), 1)), np.int64)
+        g_cols = np.zeros_like(g_rows)
         for m in range(M):
             if trainable[m]:
-                self.g_rows[m, :g_count[m]], self.g_cols[m, :g_count[m]] = np.nonzero(mask[m])
-        self.g_count = g_count.astype(np.int64)
+                g_rows[m, :g_count[m]], g_cols[m, :g_count[m]] = np.nonzero(mask[m])
         eye = np.eye(N)
-        self.q_identity = bool(np.all(Q == eye))
-        self.r_identity = bool(np.all(R == eye))
-        self.Q, self.R, self.P = (np.ascontiguousarray(a, dtype=dt) for a in (Q, R, P))
+        self.plan = Plan(s_dense, *(np.ascontiguousarray(a, dtype=dt) for a in (Q, R, P)),
+                         bool(np.all(Q == eye)), bool(np.all(R == eye)), *_padded_rows(support),
+                         *_padded_rows(support.transpose(0, 2, 1)), ab_ptr, ab_cols, ab_vals,
+                         abt_ptr, abt_cols, abt_vals, AB,
+                         # The transposed product runs faster dense than by pattern unless [A B] is sparse.
+                         bool(np.mean(AB != 0) > DENSE_AB), g_rows, g_cols, g_count)
         self._buffers = {}
 
-    def _work(self, batch: int, keep: bool):
+    def _work(self, batch: int, keep: bool) -> Workspace:
         key = (batch, keep)
         if key not in self._buffers:
             N, h, T, dt = self.N, self.h, self.T, self.dtype
             hB = h * batch
             shapes = dict(Zs=(T if keep else 2, N, hB), XU=(T + 1, 2 * N, batch), Y=(N, hB),
                           dZ=(N, hB), dY=(N, hB), dPre=(N, hB), lam=(N, batch), tmp=(N, batch),
-                          tmp2=(2 * N, batch), s_vals=self.s_cols.shape[1], st_vals=self.st_cols.shape[1],
-                          aF=(h, batch), aG=(h, batch), aW=(h * h, batch))
-            work = {name: np.zeros(shape, dt) for name, shape in shapes.items()}
-            self._buffers[key] = work
+                          tmp2=(2 * N, batch), s_vals=self.plan.s_cols.shape[1],
+                          st_vals=self.plan.st_cols.shape[1], aF=(h, batch), aG=(h, batch), aW=(h * h, batch))
+            self._buffers[key] = Workspace(**{name: np.zeros(shape, dt) for name, shape in shapes.items()})
         return self._buffers[key]
 
     def _run(self, x0, S, F, W, G, backward: bool):
@@ -474,12 +539,7 @@ class FusedStack:
         kernel = _kernel(self.N, batch, self.h, self.T, self.squash, np.dtype(self.dtype).name, backward)
         J = np.empty(M, self.dtype)
         grads = [np.empty_like(a) for a in (S, F, W, G)]
-        w = self._work(batch, backward)
-        kernel(x0, S, self.s_dense, F, W, G, self.Q, self.R, self.P, self.q_identity, self.r_identity,
-               self.s_ptr, self.s_cols, self.s_rows, self.st_ptr, self.st_cols, self.st_rows,
-               *self.ab, *self.abt, self.AB, self.ab_dense, self.g_rows, self.g_cols, self.g_count,
-               J, *grads, w["Zs"], w["XU"], w["Y"], w["dZ"], w["dY"], w["dPre"],
-               w["lam"], w["tmp"], w["tmp2"], w["s_vals"], w["st_vals"], w["aF"], w["aG"], w["aW"])
+        kernel(x0, S, F, W, G, J, *grads, *self.plan, *self._work(batch, backward))
         return J, grads
 
     def loss_and_grad(self, S, F, W, G, x0):

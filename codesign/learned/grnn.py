@@ -250,10 +250,10 @@ class GRNNSettings(TrainingSettings):
     engine : {"torch", "fused", "auto"}
         How the loss and its gradient are computed: one torch call per product
         and time step, or one compiled pass per model (numba), 2-3x as fast,
-        needing one state and one input per node; "auto" takes "fused" where it
-        applies and is faster (not for an S over half full at more than 32
-        nodes). The engines agree to rounding at every step; over a 750-step run
-        that can grow to 1e-4 or so in the final cost.
+        needing one state and one input per node. The default "auto" takes
+        "fused" where it applies and is faster (not on node blocks, nor for an S
+        over half full at more than 32 nodes). The engines agree to rounding at
+        every step; over a 750-step run that can grow to 1e-4 or so in the final cost.
     """
 
     hidden: Annotated[int, AtLeast(1)] = 5
@@ -264,7 +264,7 @@ class GRNNSettings(TrainingSettings):
     refine_ensemble: Annotated[int, AtLeast(1)] = 1
     threshold: Annotated[float, AtLeast(0)] = 4e-3
     activation: Literal[ACTIVATIONS] = "tanh"
-    engine: Literal[ENGINES] = "torch"
+    engine: Literal[ENGINES] = "auto"
 
     def loop(self, horizon: int) -> Loop:
         return Loop(steps=self.steps, batch=self.batch, horizon=horizon, clip=self.clip,

@@ -457,7 +457,7 @@ class GRNNStack(StackModel):
 
 def train_grnn(specs: list[ModelSpec], *, steps: int = 750, batch: int = 20, horizon: int = 50,
                clip: float = 10.0, curve_every: int = 10, dtype: str = "float64", activation: str = "tanh",
-               engine: str = "torch"):
+               engine: str = "auto"):
     """Train the GRNNs of ``specs`` as one stack (cosine schedule); one TrainResult per spec.
 
     A convenience over :func:`~codesign.learned.trainer.train_stack` with

@@ -1,0 +1,79 @@
+"""The GCNN's time: its controller's rollouts (most of it, in the cost's refinement) and its training.
+
+Prints, measured in one run on one thread:
+
+* seconds to roll a trained-size GCNN (K = 5 taps, 32 features, N = 20, T = 50) out from
+  ``--draws`` initial states with the controller's step (feature-major filter bank, tanh as a
+  folded sigmoid) and with the node-major step it replaced (``(batch N, K) x (K, F)`` products
+  and ``torch.tanh``), their largest difference in the inputs, and the ratio;
+* seconds per 750-step model of the trainer's GCNN stack (float32 and float64, 10 models).
+
+    python benchmarks/bench_gcnn.py [--draws 16000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+from codesign import paper_instance
+from codesign.learned import GCNNController
+from codesign.learned.gcnn import _member, _parse
+from codesign.learned.gcnn_bptt import GCNNStack
+from codesign.learned.trainer import train_stack
+
+
+def node_major_step(c: GCNNController, x):
+    """The step before 2026-11-26: powers stacked node-major, then torch.tanh."""
+    powers = [x]
+    for _ in range(c.H.shape[0] - 1):
+        powers.append(powers[-1] @ c.S.T)
+    z = np.stack(powers, axis=-1) @ c.H
+    return torch.tanh(torch.from_numpy(z)).numpy() @ c.w
+
+
+def rollout(inst, step, x0):
+    x, total = x0.copy(), 0.0
+    for _ in range(inst.horizon):
+        u = step(x)
+        total += float(np.sum(x * x) + np.sum(u * u))
+        x = x @ inst.A.T + u @ inst.B.T
+    return total
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--draws", type=int, default=16000)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    inst = paper_instance(3, n=20)
+    rng = np.random.default_rng(0)
+    c = GCNNController(inst.gso, rng.standard_normal((5, 32)) / 3, rng.standard_normal(32) / 6)
+    x0 = rng.standard_normal((args.draws, inst.n))
+    diff = np.abs(c.step(None, x0[:500])[0] - node_major_step(c, x0[:500])).max()
+    times = {}
+    for name, step in (("node-major + torch.tanh", lambda x: node_major_step(c, x)),
+                       ("feature-major + folded sigmoid", lambda x: c.step(None, x)[0])):
+        t = time.perf_counter()
+        rollout(inst, step, x0)
+        times[name] = time.perf_counter() - t
+    print(f"GCNN rollout, {args.draws} draws x {inst.horizon} steps, N = {inst.n}, one thread:")
+    for name, seconds in times.items():
+        print(f"  {name:32s} {seconds:7.2f} s")
+    old, new = times.values()
+    print(f"  ratio {old / new:.2f}x; largest difference in u {diff:.1e}")
+    print("GCNN training (10 models stacked, one thread), seconds per 750-step model:")
+    insts = [paper_instance(s, n=20, a_norm=1.05) for s in range(10)]
+    for dtype in ("float32", "float64"):
+        jobs = [_parse(i, dict(dtype=dtype, ensemble=1, steps=150)) for i in insts]
+        members = [_member(j, 0) for j in jobs]
+        t = time.perf_counter()
+        train_stack(GCNNStack, members, jobs[0].settings.loop(inst.horizon))
+        print(f"  {dtype}  {(time.perf_counter() - t) / len(members) * 5:6.2f} s")
+
+
+if __name__ == "__main__":
+    main()

@@ -6,7 +6,8 @@ Prints, measured in one run on one thread:
   ``--draws`` initial states with the controller's step (feature-major filter bank, tanh as a
   folded sigmoid) and with the node-major step it replaced (``(batch N, K) x (K, F)`` products
   and ``torch.tanh``), their largest difference in the inputs, and the ratio;
-* seconds per 750-step model of the trainer's GCNN stack (float32 and float64, 10 models).
+* seconds per 750-step model of the trainer's GCNN stack (float32 and float64, 10 models),
+  with the torch path and the fused (numba) engine, and their ratio.
 
     python benchmarks/bench_gcnn.py [--draws 16000]
 """
@@ -70,9 +71,14 @@ def main():
     for dtype in ("float32", "float64"):
         jobs = [_parse(i, dict(dtype=dtype, ensemble=1, steps=150)) for i in insts]
         members = [_member(j, 0) for j in jobs]
-        t = time.perf_counter()
-        train_stack(GCNNStack, members, jobs[0].settings.loop(inst.horizon))
-        print(f"  {dtype}  {(time.perf_counter() - t) / len(members) * 5:6.2f} s")
+        train_stack(GCNNStack, members[:1], jobs[0].settings.loop(inst.horizon), engine="fused")  # compile
+        seconds = {}
+        for engine in ("torch", "fused"):
+            t = time.perf_counter()
+            train_stack(GCNNStack, members, jobs[0].settings.loop(inst.horizon), engine=engine)
+            seconds[engine] = (time.perf_counter() - t) / len(members) * 5
+        print(f"  {dtype}  torch {seconds['torch']:6.2f} s   fused {seconds['fused']:6.2f} s   "
+              f"ratio {seconds['torch'] / seconds['fused']:.2f}x")
 
 
 if __name__ == "__main__":

@@ -91,3 +91,41 @@ def test_hand_written_bptt_matches_autograd(inst):
     np.testing.assert_allclose(loss.numpy(), reference.detach().numpy(), rtol=1e-12)
     np.testing.assert_allclose(dH.numpy(), Hl.grad.numpy(), rtol=0, atol=1e-11 * Hl.grad.abs().max().item())
     np.testing.assert_allclose(dw.numpy(), wl.grad.numpy(), rtol=0, atol=1e-11 * wl.grad.abs().max().item())
+
+
+@pytest.mark.parametrize("dtype, rtol", [("float64", 1e-12), ("float32", 1e-3)])
+def test_fused_engine_equals_the_torch_path(dtype, rtol):
+    """The compiled GCNN pass gives the torch path's loss, gradients and curve costs (to rounding)."""
+    import torch
+
+    from codesign.learned.gcnn import _member, _parse
+    from codesign.learned.gcnn_bptt import GCNNStack
+
+    insts = [paper_instance(s, n=10, degree=4, horizon=12, a_norm=1.05) for s in range(3)]
+    jobs = [_parse(i, dict(dtype=dtype, ensemble=1, steps=5, batch=6, curve_size=9)) for i in insts]
+    assert {job.engine for job in jobs} == {"fused"}  # "auto" on the paper's setting
+    members = [_member(job, 0) for job in jobs]
+    loop = jobs[0].settings.loop(12)
+    torch_path, fused = GCNNStack(members, loop, engine="torch"), GCNNStack(members, loop, engine="fused")
+    rng = np.random.default_rng(0)
+    x0 = torch.tensor(rng.standard_normal((3, 6, 10)), dtype=getattr(torch, dtype))
+    (loss_t, grads_t), (loss_f, grads_f) = torch_path.loss_and_grad(x0), fused.loss_and_grad(x0)
+    np.testing.assert_allclose(loss_f.numpy(), loss_t.numpy(), rtol=rtol)
+    for gt, gf in zip(grads_t, grads_f):
+        assert gt.shape == gf.shape
+        np.testing.assert_allclose(gf.numpy(), gt.numpy(), rtol=rtol, atol=rtol * float(gt.abs().max()))
+    xc = torch.tensor(rng.standard_normal((3, 9, 10)), dtype=x0.dtype)
+    np.testing.assert_allclose(fused.curve_cost(xc).numpy(), torch_path.curve_cost(xc).numpy(), rtol=rtol)
+
+
+def test_gcnn_engines_agree_and_fused_refuses_node_blocks():
+    from compare.families.mass_spring import mass_spring_instance
+
+    inst = paper_instance(4, n=8, degree=4, horizon=10)
+    short = dict(steps=15, ensemble=1, stability_steps=0, curve_size=20, curve_every=5)
+    by_torch, by_fused = gcnn(inst, engine="torch", **short), gcnn(inst, engine="fused", **short)
+    assert by_torch.status == by_fused.status == "optimal"
+    np.testing.assert_allclose(by_fused.extras["curve"]["cost"], by_torch.extras["curve"]["cost"], rtol=1e-9)
+    np.testing.assert_allclose(by_fused.cost, by_torch.cost, rtol=1e-9)
+    with pytest.raises(ValueError, match="engine 'fused' needs one state and one input per node"):
+        gcnn(mass_spring_instance(3), engine="fused", **short)

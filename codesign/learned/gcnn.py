@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 
@@ -45,7 +45,8 @@ from ..evaluation import spectral_radius
 from ..instances import node_ranks, node_width
 from ..methods import Above, AtLeast, AtMost, Hyperparameter, method
 from ..status import DIVERGED
-from .gcnn_bptt import GCNN_FEATURES, GCNN_TAPS, GCNNProblem, GCNNStack, gcnn_init, tap_map
+from .engines import ENGINES
+from .gcnn_bptt import GCNN_FEATURES, GCNN_TAPS, GCNNProblem, GCNNStack, _layout, gcnn_init, tap_map
 from .settings import TrainingSettings, takes_settings
 from .trainer import (Loop, Member, TrainingJob, best_member, curve, diverged_members_message, selection_costs,
                       selection_set, simulated_design, train_jobs)
@@ -224,12 +225,19 @@ class GCNNSettings(TrainingSettings):
         Updates between learning-rate decays.
     weight_decay : float
         Coupled L2 weight decay (added to the gradient, as torch.optim.Adam does).
+    engine : {"torch", "fused", "auto"}
+        How the loss and its gradient are computed: torch's batched products, or one
+        compiled pass per model (numba, :mod:`codesign.learned.gcnn_fused`), about twice as
+        fast, on the paper's setting only (one state and one input per node, Q = R = I).
+        The default "auto" takes "fused" there and "torch" elsewhere; the engines agree
+        to rounding at every step.
     """
 
     lr: Annotated[float, Above(0)] = 0.01
     decay: Annotated[float, Above(0), AtMost(1)] = 0.9
     decay_every: Annotated[int, AtLeast(1)] = 10
     weight_decay: Annotated[float, AtLeast(0)] = 2.0
+    engine: Literal[ENGINES] = "auto"
 
     def loop(self, horizon: int) -> Loop:
         return Loop(steps=self.steps, batch=self.batch, horizon=horizon, curve_every=self.curve_every,
@@ -246,6 +254,7 @@ class _Job:
     seed: int
     params: dict
     settings: GCNNSettings
+    engine: str = "torch"  # the one that runs ("auto" resolved)
 
 
 def _parse(instance, kwargs: dict) -> _Job:
@@ -257,7 +266,13 @@ def _parse(instance, kwargs: dict) -> _Job:
     if unknown:
         raise ValueError(f"unknown GCNN settings: {sorted(unknown)}; known: {sorted(known)}")
     settings = GCNNSettings(**kwargs)
-    return _Job(instance, int(seed), {"seed": int(seed), **dict(sorted(settings.changed().items()))}, settings)
+    paper_setting = _layout(instance) is None
+    if settings.engine == "fused" and not paper_setting:
+        raise ValueError("engine 'fused' needs one state and one input per node and Q = R = I; "
+                         "use engine 'torch' or 'auto'")
+    engine = "fused" if settings.engine == "fused" or (settings.engine == "auto" and paper_setting) else "torch"
+    return _Job(instance, int(seed), {"seed": int(seed), **dict(sorted(settings.changed().items()))}, settings,
+                engine)
 
 
 def _member(job: _Job, m: int) -> Member:
@@ -273,7 +288,8 @@ def gcnn_batch(jobs, *, stack_size: int = 64) -> list[Design]:
     parsed = [_parse(instance, kwargs) for instance, kwargs in jobs]
     trained, seconds = train_jobs(
         [TrainingJob(GCNNStack, [_member(job, m) for m in range(job.settings.ensemble)],
-                     job.settings.loop(job.instance.horizon)) for job in parsed], stack_size=stack_size)
+                     job.settings.loop(job.instance.horizon), options=(("engine", job.engine),))
+         for job in parsed], stack_size=stack_size)
     return [_finish(job, results, seconds[j]) for j, (job, results) in enumerate(zip(parsed, trained))]
 
 

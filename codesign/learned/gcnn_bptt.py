@@ -23,6 +23,8 @@ from dataclasses import dataclass
 from .trainer import Loop, Member, StackModel, no_grad, tanh_, torch_dtype
 
 torch = lazy_import("torch")
+#: Imported only when the fused engine runs (it loads numba), yet part of this code's fingerprint.
+FINGERPRINT_MODULES = ("codesign.learned.gcnn_fused",)
 
 __all__ = ["GCNNStack", "GCNN_TAPS", "GCNN_FEATURES", "gcnn_init", "tap_map", "scatter"]
 
@@ -250,7 +252,7 @@ class GCNNStack(StackModel):
 
     names = ("H", "w")
 
-    def __init__(self, members, loop: Loop):
+    def __init__(self, members, loop: Loop, *, engine: str = "torch"):
         tdt = torch_dtype(loop.dtype)
         problems = [m.problem for m in members]
         insts = [p.instance for p in problems]
@@ -267,7 +269,26 @@ class GCNNStack(StackModel):
         S = stack([i.gso for i in insts])
         A_t, B_t, P = stack([i.A.T for i in insts]), stack([i.B.T for i in insts]), stack([i.P for i in insts])
         trace_P = torch.tensor([i.trace_P for i in insts], dtype=tdt)
-        if layout is None:
+        if layout is None and engine == "fused":
+            from .gcnn_fused import FusedGCNN
+
+            H = stack([p.H0.reshape(GCNN_TAPS, GCNN_FEATURES) for p in problems])
+            w = stack([p.w0.reshape(GCNN_FEATURES) for p in problems])
+            compiled = FusedGCNN(np.stack([i.gso for i in insts]), np.stack([i.A for i in insts]),
+                                 np.stack([i.B for i in insts]), np.stack([i.P for i in insts]), taps=GCNN_TAPS,
+                                 features=GCNN_FEATURES, horizon=horizon, dtype=H.numpy().dtype)
+            Hn, wn = H.numpy(), w.numpy()  # views: Adam updates them in place
+
+            def nodes_first(x0):
+                return np.ascontiguousarray(x0.numpy().transpose(0, 2, 1))
+
+            def fused_loss_and_grad(x0):
+                J, dH, dw = compiled.loss_and_grad(Hn, wn, nodes_first(x0))
+                return torch.from_numpy(J) / x0.shape[1], [torch.from_numpy(dH), torch.from_numpy(dw)]
+
+            self._loss_and_grad = fused_loss_and_grad
+            self._curve_cost = lambda x0: torch.from_numpy(compiled.costs(Hn, wn, nodes_first(x0))) / x0.shape[1] / trace_P
+        elif layout is None:
             H = stack([p.H0.reshape(GCNN_TAPS, GCNN_FEATURES) for p in problems])
             w = stack([p.w0.reshape(GCNN_FEATURES) for p in problems])
             ws_train = _buffers(M, batch, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=True)

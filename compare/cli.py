@@ -20,14 +20,14 @@ __all__ = ["main"]
 #: Approximate wall time of ``compare run PRESET`` on 2 cores (2 workers), report included.
 #: A preset missing here is listed as "not measured".
 PRESET_TIMES = {
-    "quick": "~1 min (60 s measured)",
+    "quick": "~1 min (51 s measured; 67 s the first time, compiling the fused kernels)",
     "baselines-small": "~20 s (16 s measured)",
     "sls-small": "~15 s (15 s measured)",
     "table1-small": "~40 s (38 s measured)",
-    "table1": "~11 min (639 s measured)",
-    "tradeoff": "~42 min (2507 s measured)",
-    "systems": "~3 min (195 s measured)",
-    "scale": "~23 min (1355 s measured)",
+    "table1": "~5 min (318 s measured)",
+    "tradeoff": "~27 min (1605 s measured)",
+    "systems": "~3 min (177 s measured)",
+    "scale": "~21 min (1287 s measured)",
 }
 
 

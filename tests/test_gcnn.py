@@ -129,3 +129,13 @@ def test_gcnn_engines_agree_and_fused_refuses_node_blocks():
     np.testing.assert_allclose(by_fused.cost, by_torch.cost, rtol=1e-9)
     with pytest.raises(ValueError, match="engine 'fused' needs one state and one input per node"):
         gcnn(mass_spring_instance(3), engine="fused", **short)
+
+
+def test_auto_takes_the_fused_gcnn_only_where_it_is_faster():
+    from codesign.learned.gcnn import _parse
+    from compare.families.mass_spring import mass_spring_instance
+
+    assert _parse(paper_instance(0, n=20), {}).engine == "fused"
+    assert _parse(paper_instance(0, n=40, degree=6), {}).engine == "torch"  # dense loops do not unroll
+    assert _parse(paper_instance(0, n=40, degree=6), {"engine": "fused"}).engine == "fused"
+    assert _parse(mass_spring_instance(3), {}).engine == "torch"  # node blocks

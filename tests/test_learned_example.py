@@ -68,3 +68,16 @@ def test_autograd_model_trains_like_separate_runs():
         for name in ("a", "b", "w"):
             np.testing.assert_allclose(result.params[name], alone.params[name], rtol=1e-10, atol=1e-13)
         assert not result.diverged and result.curve_cost[-1] < result.curve_cost[0]
+
+
+def test_takes_settings_documents_the_fields_of_a_function_without_a_parameters_section():
+    from codesign.learned import TrainingSettings, takes_settings
+    from codesign.methods import Method
+
+    @takes_settings(TrainingSettings)
+    def bare(instance, *, seed: int = 0, **settings):
+        """A method whose docstring has no Parameters section."""
+
+    method = Method.from_function(bare, name="bare")
+    assert list(method.hyperparameters)[:3] == ["seed", "steps", "batch"]
+    assert method.hyperparameters["steps"].doc == "Adam updates"

@@ -60,6 +60,13 @@ class _NoAliasCompiler(numba.core.compiler.CompilerBase):
 PIPELINE = _NoAliasCompiler
 
 
+def kernel_jit(function):
+    """Compile a kernel (this module's and :mod:`codesign.learned.gcnn_fused`'s) with :data:`PIPELINE`."""
+    if PIPELINE is None:
+        return _jit(function)
+    return _jit(pipeline_class=PIPELINE)(function)
+
+
 # Reassociation lets reductions vectorize; no 'nnan'/'ninf': a diverging model must
 # still produce inf/NaN for the trainer to flag it. error_model="numpy": no
 # zero-division checks, which otherwise keep every loop with a division scalar.
@@ -232,7 +239,7 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
     # passed inside a tuple, or through a wrapper that LLVM inlines, lose most of it (10.8-11.0
     # against 9.45 ms a pass). Callers pass the named structures spread, in the order _ARGUMENTS
     # checks against this signature.
-    @(functools.partial(_jit, pipeline_class=PIPELINE) if PIPELINE is not None else _jit)
+    @kernel_jit
     def kernel(x0, S, F, W, G, J, dS, dF, dW, dG, s_dense, Q, R, P, q_identity, r_identity, s_ptr, s_cols,
                s_rows, st_ptr, st_cols, st_rows, ab_ptr, ab_cols, ab_vals, abt_ptr, abt_cols, abt_vals, AB,
                ab_dense, g_rows, g_cols, g_count, Zs, XU, Y, dZ, dY, dPre, lam, tmp, tmp2, s_vals, st_vals,

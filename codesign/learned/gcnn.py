@@ -43,11 +43,11 @@ from ..controllers import register_controller
 from ..design import Design, count_links
 from ..evaluation import spectral_radius
 from ..instances import node_ranks, node_width
-from ..methods import Above, AtLeast, AtMost, Hyperparameter, method
+from ..methods import Above, AtLeast, AtMost, method
 from ..status import DIVERGED
 from .engines import ENGINES, FUSED_DENSE_NODES
 from .gcnn_bptt import GCNN_FEATURES, GCNN_TAPS, GCNNProblem, GCNNStack, _layout, gcnn_init, tap_map
-from .settings import TrainingSettings, takes_settings
+from .settings import SEED, TrainingSettings, takes_settings
 from .trainer import (Loop, Member, TrainingJob, best_member, curve, diverged_members_message, selection_costs,
                       selection_set, simulated_design, train_jobs)
 
@@ -246,9 +246,6 @@ class GCNNSettings(TrainingSettings):
                     weight_decay=self.weight_decay)
 
 
-_SEED = Hyperparameter("seed", 0, Annotated[int, AtLeast(0)])
-
-
 @dataclass
 class _Job:
     instance: object
@@ -261,12 +258,8 @@ class _Job:
 def _parse(instance, kwargs: dict) -> _Job:
     kwargs = dict(kwargs)
     seed = kwargs.pop("seed", 0)
-    _SEED.check(seed, "seed")
-    known = GCNNSettings.hyperparameters()
-    unknown = set(kwargs) - set(known)
-    if unknown:
-        raise ValueError(f"unknown GCNN settings: {sorted(unknown)}; known: {sorted(known)}")
-    settings = GCNNSettings(**kwargs)
+    SEED.check(seed, "seed")
+    settings = GCNNSettings.parse(kwargs, "GCNN")
     paper_setting = _layout(instance) is None
     if settings.engine == "fused" and not paper_setting:
         raise ValueError("engine 'fused' needs one state and one input per node and Q = R = I; "

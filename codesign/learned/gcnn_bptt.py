@@ -266,17 +266,17 @@ class GCNNStack(StackModel):
         def stack(arrays):
             return torch.tensor(np.stack(arrays), dtype=tdt)
 
-        S = stack([i.gso for i in insts])
-        A_t, B_t, P = stack([i.A.T for i in insts]), stack([i.B.T for i in insts]), stack([i.P for i in insts])
         trace_P = torch.tensor([i.trace_P for i in insts], dtype=tdt)
+        if layout is None:
+            H = stack([p.H0.reshape(GCNN_TAPS, GCNN_FEATURES) for p in problems])
+            w = stack([p.w0.reshape(GCNN_FEATURES) for p in problems])
+        else:
+            H, w = stack([p.H0 for p in problems]), stack([p.w0 for p in problems])
         if layout is None and engine == "fused":
             from .gcnn_fused import FusedGCNN
 
-            H = stack([p.H0.reshape(GCNN_TAPS, GCNN_FEATURES) for p in problems])
-            w = stack([p.w0.reshape(GCNN_FEATURES) for p in problems])
-            compiled = FusedGCNN(np.stack([i.gso for i in insts]), np.stack([i.A for i in insts]),
-                                 np.stack([i.B for i in insts]), np.stack([i.P for i in insts]), taps=GCNN_TAPS,
-                                 features=GCNN_FEATURES, horizon=horizon, dtype=H.numpy().dtype)
+            compiled = FusedGCNN(*(np.stack([getattr(i, k) for i in insts]) for k in ("gso", "A", "B", "P")),
+                                 taps=GCNN_TAPS, features=GCNN_FEATURES, horizon=horizon, dtype=H.numpy().dtype)
             Hn, wn = H.numpy(), w.numpy()  # views: Adam updates them in place
 
             def nodes_first(x0):
@@ -288,16 +288,17 @@ class GCNNStack(StackModel):
 
             self._loss_and_grad = fused_loss_and_grad
             self._curve_cost = lambda x0: torch.from_numpy(compiled.costs(Hn, wn, nodes_first(x0))) / x0.shape[1] / trace_P
-        elif layout is None:
-            H = stack([p.H0.reshape(GCNN_TAPS, GCNN_FEATURES) for p in problems])
-            w = stack([p.w0.reshape(GCNN_FEATURES) for p in problems])
+            self.params = [H, w]
+            return
+        A_t, B_t, P = stack([i.A.T for i in insts]), stack([i.B.T for i in insts]), stack([i.P for i in insts])
+        if layout is None:
+            S = stack([i.gso for i in insts])
             ws_train = _buffers(M, batch, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=True)
             ws_curve = _buffers(M, curve_size, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=False)
             self._loss_and_grad = lambda x0: _loss_and_grad(S, H, w, A_t, B_t, P, x0, horizon, ws_train)
             self._curve_cost = lambda x0: _rollout_cost(S, H, w, A_t, B_t, P, x0, horizon, trace_P, ws_curve)
         else:
             _, N, p, q = layout
-            H, w = stack([p.H0 for p in problems]), stack([p.w0 for p in problems])
             L = stack([tap_map(i.gso, i.state_nodes, GCNN_TAPS, p) for i in insts])
             Eu = stack([scatter(i.input_nodes, N, q).T for i in insts])
             Q, R = stack([i.Q for i in insts]), stack([i.R for i in insts])

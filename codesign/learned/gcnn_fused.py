@@ -18,7 +18,7 @@ import functools
 
 import numpy as np
 
-from .fused import PIPELINE, _dense_mix, _jit, _tanh32, _tanh64, _tanh_constants
+from .fused import _dense_mix, _tanh32, _tanh64, _tanh_constants, kernel_jit
 
 __all__ = ["FusedGCNN"]
 
@@ -32,7 +32,7 @@ def _kernel(N: int, B: int, K: int, F: int, T: int, dtype_name: str, backward: b
     COEF, CONSTS = _tanh_constants(dt)
     WIDE = dt == np.float64
 
-    @(functools.partial(_jit, pipeline_class=PIPELINE) if PIPELINE is not None else _jit)
+    @kernel_jit
     def kernel(x0, S, H, w, A, Bm, P, J, dH, dw, X, U, XK, Acts, lam, du, dz, dXK, g, tmp):
         """Summed cost J (M,) from x0 (M, N, B) and, with ``backward``, dJ/dH (M, K, F), dJ/dw (M, F).
 

@@ -27,11 +27,11 @@ from ..controllers import register_controller
 from ..design import Design, count_links
 from ..evaluation import exact_cost, impulse_responses, spectral_radius
 from ..instances import node_ranks, node_width
-from ..methods import Above, AtLeast, Hyperparameter, method
+from ..methods import Above, AtLeast, method
 from ..status import DIVERGED, OPTIMAL
 from .engines import ENGINES, resolve_engine
 from .grnn_bptt import ACTIVATIONS, GRNNStack, ModelSpec, init_fwg
-from .settings import TrainingSettings, takes_settings
+from .settings import SEED, TrainingSettings, takes_settings
 from .trainer import (Loop, TrainingJob, best_member, curve, diverged_members_message, selection_costs,
                       selection_set, simulated_design, tanh_, train_jobs)
 
@@ -276,9 +276,6 @@ def grnn_defaults() -> dict:
     return dataclasses.asdict(GRNNSettings())
 
 
-_SEED = Hyperparameter("seed", 0, Annotated[int, AtLeast(0)])
-
-
 @dataclass
 class _Job:
     instance: object
@@ -303,11 +300,8 @@ def _parse(instance, kwargs: dict) -> _Job:
             raise ValueError(f"beta must be a finite non-negative number, got {beta!r}")
     elif beta is not None:
         raise ValueError(f"beta applies to variant 'sparse' only, got beta={beta!r} with variant {variant!r}")
-    _SEED.check(seed, "seed")
-    unknown = set(kwargs) - set(grnn_defaults())
-    if unknown:
-        raise ValueError(f"unknown GRNN settings: {sorted(unknown)}; known: {sorted(grnn_defaults())}")
-    settings = GRNNSettings(**kwargs)
+    SEED.check(seed, "seed")
+    settings = GRNNSettings.parse(kwargs, "GRNN")
     resolve_engine(settings.engine, _slot_index(instance.state_nodes, instance.nodes)[1],
                    _slot_index(instance.input_nodes, instance.nodes)[1])  # fails now, not after training
     params = {"variant": variant, "seed": int(seed), **dict(sorted(settings.changed().items()))}

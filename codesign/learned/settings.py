@@ -28,7 +28,10 @@ from typing import Annotated, Literal
 from ..methods import AtLeast, Hyperparameter
 from .trainer import DTYPES
 
-__all__ = ["TrainingSettings", "takes_settings"]
+__all__ = ["TrainingSettings", "takes_settings", "SEED"]
+
+#: A learned method's ``seed`` keyword (not a training setting: it is not part of a stack's key).
+SEED = Hyperparameter("seed", 0, Annotated[int, AtLeast(0)])
 
 
 @dataclass(frozen=True)
@@ -73,6 +76,15 @@ class TrainingSettings:
         """Field name -> :class:`~codesign.methods.Hyperparameter` (default and annotation, bounds included)."""
         hints = typing.get_type_hints(cls, include_extras=True)
         return {f.name: Hyperparameter(f.name, f.default, hints[f.name]) for f in dataclasses.fields(cls)}
+
+    @classmethod
+    def parse(cls, kwargs: dict, method: str):
+        """The settings named in ``kwargs``; ValueError naming unknown keys (and listing the known) or a bad value."""
+        known = sorted(f.name for f in dataclasses.fields(cls))
+        unknown = set(kwargs) - set(known)
+        if unknown:
+            raise ValueError(f"unknown {method} settings: {sorted(unknown)}; known: {known}")
+        return cls(**kwargs)
 
     def changed(self) -> dict:
         """The fields that differ from their defaults, by name (what a design's params record)."""
@@ -131,6 +143,8 @@ def _with_parameters(doc: str, entries: list[str]) -> str:
     """``doc`` with ``entries`` appended to its ``Parameters`` section."""
     lines = doc.splitlines()
     own = _section(doc, "Parameters")
+    if not own and not any(line.strip() == "Parameters" for line in lines):
+        return "\n".join(lines + ["", "Parameters", "----------"] + entries) + "\n"
     start = next(i for i, line in enumerate(lines) if line.strip() == "Parameters") + 2
     end = start + len(own)
     while end > start and not lines[end - 1].strip():

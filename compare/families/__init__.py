@@ -11,6 +11,14 @@ Built-in families:
 ``matrices``
     Your own systems from ``.npz`` files (key ``files``); see
     :mod:`compare.families.matrices`.
+``mass_spring``, ``random_network``
+    lqrsp's two examples (Lin, Fardad & Jovanović): a chain of masses and springs,
+    unstable second-order nodes placed at random.
+``chain``, ``swing_grid``, ``platoon``
+    The field's benchmark systems: the SLS toolboxes' doubly stochastic chain, the
+    linearized swing equations on a randomized mesh (the SLS power-grid example),
+    and a string of vehicles (Lin, Fardad & Jovanović 2012); ``chain`` and
+    ``swing_grid`` take an actuation density (nodes without an actuator).
 
 A family of your own is a :class:`Family` passed to :func:`register_family` in a
 plug-in module (``plugins = [...]`` in a spec).
@@ -26,7 +34,9 @@ __all__ = ["Family", "register_family", "get_family", "family_names", "UnknownFa
 
 #: Modules of the built-in families, imported on first use.
 _BUILTIN = {"paper": "compare.families.paper", "matrices": "compare.families.matrices",
-            "mass_spring": "compare.families.mass_spring", "random_network": "compare.families.random_network"}
+            "mass_spring": "compare.families.mass_spring", "random_network": "compare.families.random_network",
+            "chain": "compare.families.chain", "swing_grid": "compare.families.swing_grid",
+            "platoon": "compare.families.platoon"}
 _FAMILIES: dict[str, "Family"] = {}
 
 

@@ -5,6 +5,7 @@ Public names::
     from baselines import lqr, autonomous, decentralized, polish_gain
     from baselines import sls, sls_topologies, is_quadratically_invariant
     from baselines import sparse_admm, sparse_sdp, truncated_lqr, sparse_delayed
+    from baselines import sparse_budget, best_pattern     # exact link budgets, exhaustive search
     from baselines import gcnn, gcnn_batch, GCNNController   # the learned baseline, from codesign.learned
 """
 
@@ -17,6 +18,8 @@ from .sparse_admm import ADMM_GAMMAS, sparse_admm
 from .sparse_delayed import DelayedStaticGain, sparse_delayed
 from .sparse_sdp import SDP_GAMMAS, SparseSDP, sparse_sdp
 from .truncation import truncated_lqr
+from .sparse_budget import sparse_budget
+from .best_pattern import best_pattern
 
 __all__ = [
     "lqr",
@@ -39,6 +42,8 @@ __all__ = [
     "SparseSDP",
     "SDP_GAMMAS",
     "truncated_lqr",
+    "sparse_budget",
+    "best_pattern",
     "gcnn",
     "gcnn_batch",
     "GCNNController",

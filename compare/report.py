@@ -28,6 +28,7 @@ from .cost_links import Point, aggregate, pareto_front, plot_cost_vs_links, quar
 from .figures import LINESTYLES, OFF_SCALE, drawn_styles, plot_budget_fronts  # noqa: E402
 from .meta import StoreMeta  # noqa: E402
 from .records import Records, as_records  # noqa: E402
+from .pattern_gaps import pattern_gap_section  # noqa: E402
 from .report_sections import delayed_section, experiments_with, learning_sections  # noqa: E402
 from .report_tables import (_budget_tables, _environment_lines, _fingerprint_lines, _paired_lines,  # noqa: E402
                             _pareto_tables, _precision_text, _summary_tables, _uncertain_text, software_versions)
@@ -250,6 +251,7 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
         ]
         lines += _budget_tables(records)
     lines += _missing_lines(records, points, boundaries)
+    lines += pattern_gap_section(records)
     lines += delayed_section(records, save, styles, boundaries)
     lines += [
         "## Cost against links per setting (paper Fig. 3 style)", "", "![cost versus links](cost_vs_links.png)", "",

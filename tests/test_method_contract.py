@@ -29,6 +29,8 @@ FAST = {
     "sparse_sdp": {"gammas": [0.01]},
     "sparse_admm": {"gammas": [1e-3, 1e-2]},
     "truncated_lqr": {"links": [10, 0]},
+    "sparse_budget": {"links": [10, 0]},
+    "best_pattern": {"links": [0, 1, 56], "starts": 2},
     "sls_topologies": {"graphs": ["plant", "complete"]},
 }
 METHODS = sorted(registered_methods())

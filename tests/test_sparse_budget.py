@@ -1,0 +1,53 @@
+"""A static gain at every exact link budget (baselines.sparse_budget)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from codesign import get_method, paper_instance
+from compare.families.swing_grid import swing_grid_instance
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return paper_instance(1, n=10, a_norm=1.05)
+
+
+@pytest.mark.parametrize("info_model", ["instantaneous", "delayed"])
+def test_every_budget_gets_a_design_within_it(paper, info_model):
+    budgets = [90, 40, 17, 9, 3, 1, 0]
+    designs = get_method("sparse_budget")(paper, links=budgets, info_model=info_model)
+    assert [d.params["budget"] for d in designs] == budgets
+    for d in designs:
+        assert d.status == "optimal" and d.links <= d.params["budget"] and d.info_model == info_model
+        assert d.cost_kind == "exact" and d.cost >= 1.0 - 1e-9
+    costs = [d.cost for d in designs]
+    assert costs == sorted(costs)  # more links never cost more here
+    decentralized = get_method("decentralized")(paper)[0]
+    assert abs(designs[-1].cost - decentralized.cost) < 1e-9 and designs[-1].links == 0
+
+
+def test_at_or_below_truncation_and_the_l1_paths_at_their_link_counts(paper):
+    l1 = [d for d in get_method("sparse_admm")(paper) if d.status == "optimal" and 0 < d.links < 90]
+    counts = sorted({d.links for d in l1}, reverse=True)
+    budget = {d.params["budget"]: d for d in get_method("sparse_budget")(paper, links=counts)}
+    truncated = {d.params["links"]: d for d in get_method("truncated_lqr")(paper, links=counts)}
+    for d in l1:
+        assert budget[d.links].cost <= min(d.cost, truncated[d.links].cost) * (1 + 1e-9)
+    delayed = [d for d in get_method("sparse_delayed")(paper) if d.status == "optimal" and 0 < d.links < 90]
+    counts = sorted({d.links for d in delayed}, reverse=True)
+    budget = {d.params["budget"]: d for d in get_method("sparse_budget")(paper, links=counts, info_model="delayed")}
+    for d in delayed:
+        assert budget[d.links].cost <= d.cost * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("info_model", ["instantaneous", "delayed"])
+def test_node_blocks_and_unactuated_nodes(info_model):
+    grid = swing_grid_instance(3, seed=2, actuation=0.5)  # 9 buses, 5 actuated, two states each
+    designs = get_method("sparse_budget")(grid, info_model=info_model)
+    most = 5 * 8  # links only from actuated buses
+    assert designs[0].params["budget"] == most
+    assert all(d.status == "optimal" and d.links <= d.params["budget"] for d in designs)
+    with pytest.raises(ValueError, match=r"links must be integers between 0 and 40 \(the admissible links\), got 41"):
+        get_method("sparse_budget")(grid, links=[41])

@@ -24,10 +24,11 @@ PRESET_TIMES = {
     "baselines-small": "~20 s (16 s measured)",
     "sls-small": "~15 s (15 s measured)",
     "table1-small": "~40 s (38 s measured)",
-    "table1": "~5 min (318 s measured)",
-    "tradeoff": "~27 min (1605 s measured)",
+    "table1": "~5 min (298 s measured)",
+    "tradeoff": "~25 min (1495 s measured)",
     "systems": "~3 min (177 s measured)",
     "scale": "~21 min (1287 s measured)",
+    "small": "~7 min (420 s measured)",
 }
 
 

@@ -78,6 +78,8 @@ def pattern_gap_section(records) -> list[str]:
                   "| method | instances | " + " | ".join(heads) + " |",
                   "|---|---:|" + "---:|" * len(budgets)]
         for label, values in medians.items():
+            if not counts[label]:
+                continue  # no usable design on any instance (SLS on an infeasible graph)
             lines.append(f"| {label} | {counts[label]} | " + " | ".join(_pct(v) for v in values) + " |")
         reached, tried = starts
         note = (f"Starts per pattern: {tried}; the best value of every budget was reached by start "

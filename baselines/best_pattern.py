@@ -35,10 +35,10 @@ import numpy as np
 
 from codesign.design import Design
 from codesign.methods import AtLeast, NotEmpty, method
-from codesign.status import USABLE
 
 from ._common import Timer
-from .sparse_budget import INFO_MODELS, _admissible, _Delayed, _Instantaneous
+from ._sparse import DecentralizedCache
+from .sparse_budget import INFO_MODELS, _admissible, _Delayed, _Instantaneous, check_budgets
 
 __all__ = ["best_pattern", "automorphisms"]
 
@@ -137,13 +137,7 @@ def best_pattern(
     """
     admissible = _admissible(instance)
     most = int(admissible.sum())
-    budgets = _fitting_budgets(most, max_patterns) if links is None else links
-    checked = []
-    for count in budgets:
-        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 0 <= count <= most:
-            raise ValueError(f"links must be integers between 0 and {most} (the admissible links), got {count!r}")
-        checked.append(int(count))
-    checked = sorted(set(checked), reverse=True)
+    checked = check_budgets(_fitting_budgets(most, max_patterns) if links is None else links, most)
     total = sum(math.comb(most, L) for L in checked)
     if total > max_patterns:
         raise ValueError(f"best_pattern: budgets {checked} on {most} admissible links take {total} patterns, more "
@@ -157,8 +151,6 @@ def best_pattern(
     cells = np.flatnonzero(admissible)
     with Timer() as timer:
         dense = model.dense()
-        from ._sparse import DecentralizedCache
-
         diagonal = DecentralizedCache(instance).get().controller
         local = diagonal.K if diagonal is not None else instance.K_lqr
         decentral = (local if info_model == "instantaneous"

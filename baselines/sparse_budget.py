@@ -63,6 +63,16 @@ def _admissible(instance) -> np.ndarray:
     return actuated[:, None] & ~np.eye(instance.nodes, dtype=bool)
 
 
+def check_budgets(budgets, most: int) -> list[int]:
+    """The distinct link budgets, largest first; each an integer between 0 and ``most`` (the admissible links)."""
+    checked = set()
+    for count in budgets:
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 0 <= count <= most:
+            raise ValueError(f"links must be integers between 0 and {most} (the admissible links), got {count!r}")
+        checked.add(int(count))
+    return sorted(checked, reverse=True)
+
+
 def _largest(sizes, admissible, count: int) -> np.ndarray:
     """The ``count`` admissible node links of largest size (ties by position), as an (N, N) mask."""
     flat = np.flatnonzero(admissible)
@@ -231,13 +241,7 @@ def sparse_budget(
         gain.
     """
     admissible = _admissible(instance)
-    most = int(admissible.sum())
-    budgets = budget_grid(instance) if links is None else links
-    checked = []
-    for count in budgets:
-        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 0 <= count <= most:
-            raise ValueError(f"links must be integers between 0 and {most} (the admissible links), got {count!r}")
-        checked.append(int(count))
+    checked = check_budgets(budget_grid(instance) if links is None else links, int(admissible.sum()))
     if info_model not in INFO_MODELS:
         raise ValueError(f"info_model must be one of {INFO_MODELS}, got {info_model!r}")
     model = _Instantaneous(instance) if info_model == "instantaneous" else _Delayed(instance)
@@ -245,7 +249,7 @@ def sparse_budget(
     with Timer() as timer:
         dense, path = model.dense(), model.path()
     designs, previous = [], None
-    for budget in sorted(set(checked), reverse=True):  # largest first: each warm-starts the next
+    for budget in checked:  # largest first: each warm-starts the next
         params = {"budget": budget, "info_model": info_model, "rounds": int(rounds)}
         with Timer() as step:
             diagonal = decentral.usable()

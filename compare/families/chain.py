@@ -48,6 +48,17 @@ def actuated_nodes(n: int, density: float) -> np.ndarray:
     return np.array([int(math.floor(k / density + 1e-12)) % n for k in range(count)])
 
 
+def parse_actuation(table: dict) -> tuple[float, int]:
+    """The ``actuation`` density (in (0, 1], default 1) and ``horizon`` (>= 1, default 50) keys of a table."""
+    actuation = _typed("instances.actuation", table.get("actuation", 1.0), float)
+    horizon = _typed("instances.horizon", table.get("horizon", 50), int)
+    if not 0 < actuation <= 1:
+        raise SpecError(f"instances.actuation: an actuation density must be in (0, 1], got {actuation}")
+    if horizon < 1:
+        raise SpecError(f"instances.horizon: must be >= 1, got {horizon}")
+    return actuation, horizon
+
+
 def chain_matrix(n: int, rho: float, alpha: float) -> np.ndarray:
     """ρ times the doubly stochastic tridiagonal mixing matrix (row and column sums ρ)."""
     A = (1.0 - 2.0 * alpha) * np.eye(n) + alpha * (np.eye(n, k=1) + np.eye(n, k=-1))
@@ -78,16 +89,11 @@ def parse(table: dict, base=None) -> tuple:
         raise SpecError(f"instances.n: at least 2 nodes, got {list(sizes)}")
     rho = _typed("instances.rho", table.get("rho", 1.0), float)
     alpha = _typed("instances.alpha", table.get("alpha", 0.2), float)
-    actuation = _typed("instances.actuation", table.get("actuation", 1.0), float)
-    horizon = _typed("instances.horizon", table.get("horizon", 50), int)
+    actuation, horizon = parse_actuation(table)
     if not (math.isfinite(rho) and rho > 0):
         raise SpecError(f"instances.rho: must be positive, got {rho}")
     if not 0 <= alpha <= 0.5:
         raise SpecError(f"instances.alpha: must be in [0, 0.5], got {alpha}")
-    if not 0 < actuation <= 1:
-        raise SpecError(f"instances.actuation: an actuation density must be in (0, 1], got {actuation}")
-    if horizon < 1:
-        raise SpecError(f"instances.horizon: must be >= 1, got {horizon}")
     return tuple({"family": "chain", "n": n, "rho": rho, "alpha": alpha, "actuation": actuation,
                   "horizon": horizon} for n in sizes)
 

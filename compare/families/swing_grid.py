@@ -46,7 +46,7 @@ import numpy as np
 
 from ..spec import SpecError, _check_keys, _list_of, _typed
 from . import Family, register_family
-from .chain import actuated_nodes
+from .chain import actuated_nodes, parse_actuation
 
 __all__ = ["swing_grid_instance", "swing_matrix", "mesh_edges"]
 
@@ -131,17 +131,12 @@ def parse(table: dict, base=None) -> tuple:
     if count < 1:
         raise SpecError(f"instances.seeds: a count must be >= 1, got {count}")
     keep = _typed("instances.keep", table.get("keep", 0.8), float)
-    actuation = _typed("instances.actuation", table.get("actuation", 1.0), float)
+    actuation, horizon = parse_actuation(table)
     dt = _typed("instances.dt", table.get("dt", 0.2), float)
-    horizon = _typed("instances.horizon", table.get("horizon", 50), int)
     if not 0 < keep <= 1:
         raise SpecError(f"instances.keep: a probability in (0, 1], got {keep}")
-    if not 0 < actuation <= 1:
-        raise SpecError(f"instances.actuation: an actuation density must be in (0, 1], got {actuation}")
     if not (math.isfinite(dt) and dt > 0):
         raise SpecError(f"instances.dt: must be positive, got {dt}")
-    if horizon < 1:
-        raise SpecError(f"instances.horizon: must be >= 1, got {horizon}")
     return tuple({"family": "swing_grid", "grid": g, "seed": seed, "keep": keep, "actuation": actuation, "dt": dt,
                   "horizon": horizon} for g in grids for seed in range(count))
 

@@ -195,7 +195,7 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
         usable = [p for p in points if p.panel == panel and p.ok > 0]
         if not usable:
             continue
-        scale = panel[1] if per_node else 1.0
+        scale = panel[1] if per_node and panel[1] else 1.0  # links per node; 0: a family without n
         bottom, top = limits or _y_limits(shown_costs(usable))
         right = max(p.links[2] for p in usable) / scale
         for label, rs in (designs[panel].by_label.items() if panel in designs else ()):

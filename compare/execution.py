@@ -14,6 +14,8 @@ import time
 from contextlib import contextmanager
 from functools import lru_cache
 
+import numpy as np
+
 from codesign import Design, count_links
 from codesign.scoring import evaluate
 from codesign.status import FAILED
@@ -41,15 +43,19 @@ def build_instance(instance_spec: dict):
 def instance_facts(instance) -> dict:
     """What a report needs to know about an instance without rebuilding it.
 
-    ``n``, ``plant_links``, ``comm_links`` and the ``drawing`` its topology figure
-    draws (:func:`compare.topologies.drawing_facts`), None for an instance of more
-    than :data:`compare.topologies.DRAWN_NODES_AT_MOST` nodes. (Facts without a
-    ``drawing`` key were stored before drawings were.)
+    ``n`` (states), ``nodes``, ``inputs``, ``actuated`` (nodes with an input), ``radius`` (the
+    open-loop spectral radius), ``plant_links``, ``comm_links`` and the ``drawing``
+    its topology figure draws (:func:`compare.topologies.drawing_facts`), None for an
+    instance of more than :data:`compare.topologies.DRAWN_NODES_AT_MOST` nodes.
+    (Facts without a ``drawing`` key were stored before drawings were, without
+    ``radius`` before the systems table.)
     """
     from .drawing import drawing_facts
 
-    return {"n": int(instance.n), "plant_links": count_links(instance.plant_adj)[0],
-            "comm_links": count_links(instance.comm_adj)[0], "drawing": drawing_facts(instance)}
+    return {"n": int(instance.n), "nodes": int(instance.nodes), "inputs": int(instance.m),
+            "actuated": int(np.unique(instance.input_nodes).size), "radius": float(instance.open_loop_radius),
+            "plant_links": count_links(instance.plant_adj)[0], "comm_links": count_links(instance.comm_adj)[0],
+            "drawing": drawing_facts(instance)}
 
 
 def _evaluated(instance, designs, evaluation) -> list[Design]:

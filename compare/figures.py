@@ -240,7 +240,7 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
     for panel in panels:
         ax = axes[panel]
         mine = [f for f in fronts if f.panel == panel]
-        scale = panel[1] if per_node else 1.0
+        scale = panel[1] if per_node and panel[1] else 1.0  # links per node; 0: a family without n
         right = max(float(f.budgets[-1]) for f in mine) / scale
         if not any(np.isfinite(f.cost[1]).any() for f in mine):
             continue

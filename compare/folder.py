@@ -67,6 +67,11 @@ _TEXT = ("label", "method", "status", "cost_kind", "info_model", "message", "run
 _NUMBERS = ("cost", "cost_stderr", "links", "self_loops", "seconds", "run_seconds", "run_designs", "run_peak_mb")
 #: Instance facts: runs.csv column -> InstanceRecord attribute and the key the runner stores it under.
 _FACTS = {"instance_nodes": "n", "plant_links": "plant_links", "comm_links": "comm_links"}
+#: Facts added later, written after every other column when some instance has them; a folder written
+#: before them (or from a store without them) has none.
+#: runs.csv column -> (InstanceRecord attribute, the runner's fact key).
+_LATER_FACTS = {"nodes": ("node_count", "nodes"), "inputs": ("inputs", "inputs"),
+                "actuated_nodes": ("actuated", "actuated"), "open_loop_radius": ("radius", "radius")}
 
 
 class FolderError(ValueError):
@@ -119,7 +124,9 @@ def _number_json(value) -> str:
 
 def _runs_rows(records: Records) -> Iterable[list]:
     instance_fields = sorted({k for inst in records.instances for k in inst.spec})
-    yield [f"instance_{k}" for k in instance_fields] + list(_OLD_COLUMNS) + list(_NEW_COLUMNS)
+    later = [c for c, (attr, _) in _LATER_FACTS.items()
+             if any(getattr(i, attr) is not None for i in records.instances)]
+    yield [f"instance_{k}" for k in instance_fields] + list(_OLD_COLUMNS) + list(_NEW_COLUMNS) + later
     for r in records:
         values = {name: getattr(r, name) for name in (*_TEXT, *_NUMBERS, "idx")}
         values.update(
@@ -127,8 +134,9 @@ def _runs_rows(records: Records) -> Iterable[list]:
             extras=json.dumps({k: v for k, v in r.extras.items() if _is_scalar(v)}, sort_keys=True),
             **{column: getattr(r.instance, attr) for column, attr in _FACTS.items()},
         )
+        values.update({column: getattr(r.instance, _LATER_FACTS[column][0]) for column in later})
         row = [r.instance.spec.get(k, "") for k in instance_fields]
-        yield row + [_cell(values[c]) for c in (*_OLD_COLUMNS, *_NEW_COLUMNS)]
+        yield row + [_cell(values[c]) for c in (*_OLD_COLUMNS, *_NEW_COLUMNS, *later)]
 
 
 def _curve_rows(records: Records) -> Iterable[list]:
@@ -349,6 +357,11 @@ def _parse_run(cells: dict) -> dict:
         except ValueError as exc:  # json.JSONDecodeError included
             raise ValueError(f"column {name}: {exc}") from None
     row["facts"] = {attr: row.pop(column) for column, attr in _FACTS.items()}
+    for column, (_, key) in _LATER_FACTS.items():
+        try:
+            row["facts"][key] = _number(cells.get(column, ""))
+        except ValueError as exc:
+            raise ValueError(f"column {column}: {exc}") from None
     return row
 
 

@@ -40,7 +40,8 @@ def pattern_gaps(records) -> dict:
         for (pnl, label), rs in sorted(records.by_panel_label.items()):
             if pnl != panel or rs[0].method == YARDSTICK or rs[0].info_model != info:
                 continue
-            gap = best_within(rs, panels[panel], budgets) / reference - 1.0
+            with np.errstate(invalid="ignore", divide="ignore"):  # inf / inf where neither has a design
+                gap = best_within(rs, panels[panel], budgets) / reference - 1.0
             finite = np.isfinite(gap)
             medians[label] = np.array([np.median(gap[finite[:, k], k]) if finite[:, k].any() else np.nan
                                        for k in range(budgets.size)])

@@ -117,6 +117,10 @@ class InstanceRecord:
         What the designed-topology figure draws of the instance (its graphs and
         node colours); the runner stores it for instances of at most
         :data:`compare.drawing.DRAWN_NODES_AT_MOST` nodes.
+    inputs, actuated, node_count : int or None
+        Inputs of the instance, the nodes that hold at least one, and the nodes.
+    radius : float or None
+        Spectral radius of the open-loop A.
 
     Each fact is None where the store holds none for the instance.
     """
@@ -127,13 +131,18 @@ class InstanceRecord:
     plant_links: int | None = field(default=None, compare=False)
     comm_links: int | None = field(default=None, compare=False)
     drawing: Any = field(default=None, compare=False, repr=False)
+    inputs: int | None = field(default=None, compare=False)
+    actuated: int | None = field(default=None, compare=False)
+    radius: float | None = field(default=None, compare=False)
+    node_count: int | None = field(default=None, compare=False)
 
     @classmethod
     def from_spec(cls, spec: Mapping, facts: Mapping | None = None) -> InstanceRecord:
         """The record of ``spec``, with ``facts`` as the runner stores them.
 
-        ``n``, ``plant_links``, ``comm_links`` and ``drawing``
-        (:meth:`compare.drawing.InstanceDrawing.from_facts`; ValueError if malformed).
+        ``n``, ``plant_links``, ``comm_links``, ``drawing``
+        (:meth:`compare.drawing.InstanceDrawing.from_facts`; ValueError if malformed),
+        ``inputs``, ``actuated``, ``radius`` and ``nodes`` (as ``node_count``).
         """
         facts = facts or {}
         drawing = facts.get("drawing")
@@ -142,7 +151,8 @@ class InstanceRecord:
 
             drawing = InstanceDrawing.from_facts(drawing)
         return cls(_frozen(spec), canonical_key(spec), facts.get("n"), facts.get("plant_links"),
-                   facts.get("comm_links"), drawing)
+                   facts.get("comm_links"), drawing, facts.get("inputs"), facts.get("actuated"), facts.get("radius"),
+                   facts.get("nodes"))
 
     @property
     def family(self) -> str:
@@ -163,8 +173,8 @@ class InstanceRecord:
 
     @property
     def nodes(self) -> int | None:
-        """The node count as the spec gives it (``n``), else the stored state count, else None."""
-        n = self.spec.get("n", self.n)
+        """The node count as the spec gives it (``n``), else the stored node count, else the stored state count."""
+        n = self.spec.get("n", self.node_count if self.node_count is not None else self.n)
         return n if isinstance(n, int) and not isinstance(n, bool) else None
 
     @property

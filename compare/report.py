@@ -30,8 +30,9 @@ from .meta import StoreMeta  # noqa: E402
 from .records import Records, as_records  # noqa: E402
 from .pattern_gaps import pattern_gap_section  # noqa: E402
 from .report_sections import delayed_section, experiments_with, learning_sections  # noqa: E402
-from .report_tables import (_budget_tables, _environment_lines, _fingerprint_lines, _paired_lines,  # noqa: E402
-                            _pareto_tables, _precision_text, _summary_tables, _uncertain_text, software_versions)
+from .report_tables import (_asked_pairs, _budget_tables, _environment_lines, _fingerprint_lines, _paired_lines,  # noqa: E402
+                            _pareto_tables, _precision_text, _summary_tables, _systems_table, _uncertain_text,
+                            software_versions)
 from .statistics import best_tables, budget_fronts, panel_title  # noqa: E402
 from .styles import label_styles  # noqa: E402
 
@@ -117,19 +118,6 @@ def _save(out: Path, files: dict, drawn: dict):
         plt.close(fig)
 
     return save
-
-
-def _asked_pairs(records: Records, meta: StoreMeta) -> list[tuple[str, str]]:
-    """The (first, second) label pairs the specs ask for (``pairs`` in a spec; method names map to labels)."""
-    by_method = {r.method: r.label for r in records}
-    labels = records.by_label
-    asked = []
-    for _, pairs in sorted(meta.pairs.items()):
-        for first, second in pairs:
-            pair = tuple(by_method.get(x, x) for x in (first, second))
-            if all(x in labels for x in pair) and pair not in asked:
-                asked.append(pair)
-    return asked
 
 
 def _missing_lines(records: Records, points: list[Point], boundaries: dict) -> list[str]:
@@ -239,6 +227,7 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
         "instance by instance. How it was computed, and how to rebuild it, is at the end.",
         "",
     ]
+    lines += _systems_table(records)
     if fronts:
         lines += [
             "## Best cost within a link budget", "", "![budget fronts](budget_fronts.png)", "",

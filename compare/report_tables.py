@@ -6,6 +6,7 @@ method has no usable design there (or the column does not apply to it).
 
 from __future__ import annotations
 
+import itertools
 import platform
 from collections import Counter, defaultdict
 from collections.abc import Mapping
@@ -81,6 +82,33 @@ def _summary_tables(points: list[Point], records: Records | None = None) -> list
     return lines
 
 
+def _systems_table(records: Records) -> list[str]:
+    """The systems compared, one row per panel, from the facts the runner stored (none for older stores)."""
+    def spread(values, fmt) -> str:
+        values = sorted(v for v in values if v is not None)
+        if not values:
+            return "—"
+        low, mid, high = (fmt(v) for v in (values[0], values[len(values) // 2], values[-1]))
+        return mid if low == high else f"{mid} [{low}, {high}]"
+
+    rows = []
+    for panel, rs in sorted(records.by_panel.items()):
+        instances = [i for i in rs.instances if i.radius is not None]
+        if not instances:
+            continue
+        per_node = spread([i.n / i.node_count for i in instances if i.n and i.node_count], lambda v: f"{v:g}")
+        rows.append(f"| {panel_title(panel)} | {len(instances)} | {spread([i.node_count for i in instances], str)} | "
+                    f"{per_node} | {spread([i.actuated for i in instances], str)} | "
+                    f"{spread([i.plant_links for i in instances], str)} | {spread([i.comm_links for i in instances], str)} "
+                    f"| {spread([i.radius for i in instances], lambda v: f'{v:.4g}')} |")
+    if not rows:
+        return []
+    return ["| system | instances | nodes | states per node | actuated nodes | plant-graph links | given-graph links | "
+            "open-loop spectral radius |", "|---|---:|---:|---:|---:|---:|---:|---:|", *rows, "",
+            "Links are directed and off-diagonal, between nodes; where instances differ, the median and the range "
+            "[lowest, highest]. A node without an actuator keeps its states and its links.", ""]
+
+
 def _budget_tables(records: Records, budgets=(20, 60, 140, None)) -> list[str]:
     """The budget fronts at a few budgets, with the number of instances where some design fits."""
     grid = np.array([np.inf if b is None else b for b in budgets], dtype=float)
@@ -128,10 +156,25 @@ def _paired_table(comparisons: dict, title: str, info: Mapping) -> list[str]:
     return lines
 
 
+def _asked_pairs(records: Records, meta: StoreMeta) -> list[tuple[str, str]]:
+    """The (first, second) label pairs the specs ask for (``pairs`` in a spec; a method name stands for each of
+    its labels)."""
+    by_method: dict[str, list[str]] = {}
+    for r in records:
+        if r.label not in by_method.setdefault(r.method, []):
+            by_method[r.method].append(r.label)
+    labels = records.by_label
+    asked = []
+    for _, pairs in sorted(meta.pairs.items()):
+        for first, second in pairs:
+            for pair in itertools.product(by_method.get(first, [first]), by_method.get(second, [second])):
+                if pair[0] != pair[1] and all(x in labels for x in pair) and pair not in asked:
+                    asked.append(pair)
+    return asked
+
+
 def _paired_lines(records: Records, meta: StoreMeta) -> list[str]:
     """GRNN-Sparse against every other method, and the pairs the specs ask for, per budget."""
-    labels = records.by_label
-    by_method = {r.method: r.label for r in records}
     info = {r.label: r.info_model for r in records}
     lines = []
     # The paper's GRNN-Sparse (tanh), not the linear ablation that shares its method name.
@@ -139,12 +182,7 @@ def _paired_lines(records: Records, meta: StoreMeta) -> list[str]:
                       and r.params.get("activation", "tanh") == "tanh"), None)
     if reference:
         lines += _paired_table(paired_comparisons(records, reference), f"{reference} against every method", info)
-    asked = []
-    for _, pairs in sorted(meta.pairs.items()):
-        for first, second in pairs:
-            pair = tuple(by_method.get(x, x) for x in (first, second))
-            if all(x in labels for x in pair) and pair not in asked and pair[0] != reference:
-                asked.append(pair)
+    asked = [pair for pair in _asked_pairs(records, meta) if pair[0] != reference]
     for first, second in asked:
         lines += _paired_table(paired_comparisons(records, first, others={second}), f"{first} against {second}", info)
     if not lines:

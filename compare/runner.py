@@ -204,7 +204,7 @@ def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store) -> None:
                        {"modules": details["modules"], "versions": details["versions"]})
     known = store.instance_facts()
     for key, spec_dict in {canonical_key(run.instance): run.instance for run in runs}.items():
-        if key not in known:
+        if "radius" not in known.get(key, {}):  # new, or stored before the systems table's facts
             try:
                 facts = instance_facts(build_instance(spec_dict))
             except Exception:  # the instance's runs record the failure; the report draws without its facts

@@ -51,3 +51,22 @@ def test_node_blocks_and_unactuated_nodes(info_model):
     assert all(d.status == "optimal" and d.links <= d.params["budget"] for d in designs)
     with pytest.raises(ValueError, match=r"links must be integers between 0 and 40 \(the admissible links\), got 41"):
         get_method("sparse_budget")(grid, links=[41])
+
+
+def test_a_pair_named_by_method_compares_each_of_its_labels(tmp_path):
+    """report.pairs = [["sparse_budget", "sparse_admm"]] pairs every label of sparse_budget with the ADMM path."""
+    from click.testing import CliRunner
+
+    from compare.cli import main
+
+    (tmp_path / "p.toml").write_text(
+        'name = "p"\n[report]\npairs = [["sparse_budget", "sparse_admm"]]\n'
+        '[instances]\nfamily = "paper"\nn = [6]\ndegree = 3\na_norms = [1.05]\nseeds = 2\nhorizon = 15\n'
+        '[[methods]]\nmethod = "sparse_admm"\n[[methods]]\nmethod = "sparse_budget"\n'
+        '[[methods]]\nmethod = "sparse_budget"\nlabel = "Budget, delayed"\nparams = { info_model = "delayed" }\n')
+    result = CliRunner().invoke(main, ["run", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out"),
+                                       "--workers", "1", "--no-progress"])
+    assert result.exit_code == 0, result.output
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "| Sparse K at exact budgets (GraSP) − Sparse K (l1 ADMM) | instantaneous |" in report
+    assert "compare Budget, delayed and Sparse K (l1 ADMM)** (crosses models: delayed vs instantaneous)" in report

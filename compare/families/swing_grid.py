@@ -117,7 +117,7 @@ def swing_grid_instance(g: int, *, seed: int = 0, keep: float = 0.8, actuation: 
     B[2 * nodes + 1, np.arange(nodes.size)] = 1.0
     inst = Instance.from_matrices(A, B, comm_adj=adj, horizon=horizon, state_nodes=np.repeat(np.arange(N), 2),
                                   input_nodes=nodes)
-    spec = {"family": "swing_grid", "grid": int(g), "seed": int(seed), "keep": float(keep),
+    spec = {"family": "swing_grid", "grid": int(g), "n": int(N), "seed": int(seed), "keep": float(keep),
             "actuation": float(actuation), "dt": float(dt), "horizon": int(horizon)}
     return replace(inst, spec=spec)
 
@@ -137,8 +137,9 @@ def parse(table: dict, base=None) -> tuple:
         raise SpecError(f"instances.keep: a probability in (0, 1], got {keep}")
     if not (math.isfinite(dt) and dt > 0):
         raise SpecError(f"instances.dt: must be positive, got {dt}")
-    return tuple({"family": "swing_grid", "grid": g, "seed": seed, "keep": keep, "actuation": actuation, "dt": dt,
-                  "horizon": horizon} for g in grids for seed in range(count))
+    # n, the node count g^2, is derived (not a key): reports and `where` read every family's size from it.
+    return tuple({"family": "swing_grid", "grid": g, "n": g * g, "seed": seed, "keep": keep, "actuation": actuation,
+                  "dt": dt, "horizon": horizon} for g in grids for seed in range(count))
 
 
 def states(spec: dict) -> int:
@@ -157,5 +158,5 @@ SWING_GRID = register_family(Family(
     parse=parse,
     build=build,
     states=states,
-    fields=frozenset({"grid", "seed", "keep", "actuation", "dt", "horizon"}),
+    fields=frozenset({"grid", "n", "seed", "keep", "actuation", "dt", "horizon"}),
 ))

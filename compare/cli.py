@@ -29,7 +29,7 @@ PRESET_TIMES = {
     "systems": "~3 min (177 s measured)",
     "scale": "~21 min (1287 s measured)",
     "small": "~7 min (420 s measured)",
-    "benchmark-systems": "~4 min (241 s measured)",
+    "benchmark-systems": "~6.5 min (384 s measured)",
 }
 
 

@@ -266,9 +266,12 @@ def _alive(pids) -> set[int]:
 def _start_hanging_run(tmp_path) -> tuple[subprocess.Popen, set[int]]:
     spec = _spec(tmp_path / "s.toml", ["fault_hang"], extra="")
     spec.write_text(spec.read_text().replace("seeds = 1", "seeds = 2"))
+    # As from a terminal's foreground: Ctrl-C not ignored. (A shell starts background jobs with SIGINT
+    # ignored, and a process keeps an ignored SIGINT ignored: run from one, the run could not be interrupted.)
     proc = subprocess.Popen([sys.executable, "-m", "compare.cli", "run", str(spec), "--out", str(tmp_path / "o"),
                              "--workers", "2", "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+                            text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     workers: set[int] = set()
     while time.monotonic() < deadline:

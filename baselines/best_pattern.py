@@ -37,8 +37,7 @@ from codesign.design import Design
 from codesign.methods import AtLeast, NotEmpty, method
 
 from ._common import Timer
-from ._sparse import DecentralizedCache
-from .sparse_budget import INFO_MODELS, _admissible, _Delayed, _Instantaneous, check_budgets
+from .sparse_budget import INFO_MODELS, _admissible, check_budgets, gain_model
 
 __all__ = ["best_pattern", "automorphisms"]
 
@@ -91,7 +90,8 @@ def _fitting_budgets(most: int, max_patterns: int) -> list[int]:
     return chosen
 
 
-def _random_start(gain, links, rng, model):
+def _random_start(gain, rng, model):
+    """``gain`` with its links perturbed by half its largest link block (at least 1e-3), seeded by ``rng``."""
     scale = 0.5 * max(float(np.max(model.sizes(gain))), 1e-3)
     if isinstance(gain, tuple):
         return gain[0], gain[1] + scale * rng.standard_normal(gain[1].shape)
@@ -143,18 +143,12 @@ def best_pattern(
         raise ValueError(f"best_pattern: budgets {checked} on {most} admissible links take {total} patterns, more "
                          f"than max_patterns = {max_patterns} (budget L alone takes C({most}, L)); ask for fewer "
                          f"budgets or raise max_patterns")
-    if info_model not in INFO_MODELS:
-        raise ValueError(f"info_model must be one of {INFO_MODELS}, got {info_model!r}")
-    model = _Instantaneous(instance) if info_model == "instantaneous" else _Delayed(instance)
+    model = gain_model(instance, info_model)
     rng = np.random.default_rng([int(seed), 0xB357])
     perms = automorphisms(instance)
     cells = np.flatnonzero(admissible)
     with Timer() as timer:
-        dense = model.dense()
-        diagonal = DecentralizedCache(instance).get().controller
-        local = diagonal.K if diagonal is not None else instance.K_lqr
-        decentral = (local if info_model == "instantaneous"
-                     else (model.nodes.local_matrix(model.nodes.local(local)), np.zeros_like(local)))
+        dense, decentral = model.dense(), model.local_start()
     designs = []
     for budget in checked:
         with Timer() as step:
@@ -164,7 +158,7 @@ def best_pattern(
             for pattern in patterns:
                 mask = np.zeros(admissible.shape, dtype=bool)
                 mask.ravel()[cells[list(pattern)]] = True
-                initial = [dense, decentral] + [_random_start(dense, mask, rng, model) for _ in range(starts - 2)]
+                initial = [dense, decentral] + [_random_start(dense, rng, model) for _ in range(starts - 2)]
                 running = None
                 for k, gain in enumerate(initial[:starts]):
                     new, cost, stable, _, extras = model.polish(gain, mask)

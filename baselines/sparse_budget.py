@@ -85,10 +85,14 @@ def _largest(sizes, admissible, count: int) -> np.ndarray:
 class _Instantaneous:
     """``u = K x``: the gain, its polish on a node pattern, its gradient's link sizes, its design."""
 
-    name = "instantaneous"
-
     def __init__(self, instance):
         self.instance = instance
+        self.decentral = DecentralizedCache(instance)
+
+    def local_start(self):
+        """The best diagonal gain (LQR's gain where none is found), no links."""
+        start = self.decentral.get().controller
+        return start.K if start is not None else self.instance.K_lqr
 
     def dense(self):
         return self.instance.K_lqr
@@ -121,16 +125,20 @@ class _Instantaneous:
 class _Delayed:
     """``u(t) = K_l x(t) + K_d x(t - 1)`` (:mod:`baselines.sparse_delayed`): links are K_d's node blocks."""
 
-    name = "delayed"
-
     def __init__(self, instance):
         self.instance = instance
         self.nodes = DelayedNodes(instance)
+        self.decentral = DecentralizedCache(instance)
+
+    def local_start(self):
+        """The best diagonal gain (stabilizing where one exists, else LQR's diagonal) with no links."""
+        start = self.decentral.get().controller
+        local = self.nodes.local_matrix(self.nodes.local(start.K if start is not None else self.instance.K_lqr))
+        return local, np.zeros_like(local)
 
     def dense(self):
-        start = DecentralizedCache(self.instance).get().controller
-        local = self.nodes.local_matrix(self.nodes.local(start.K if start is not None else self.instance.K_lqr))
-        dense = polish_delayed(self.instance, local, np.zeros_like(local), self.nodes.off)
+        local, zero = self.local_start()
+        dense = polish_delayed(self.instance, local, zero, self.nodes.off)
         return self.nodes.local_matrix(dense.local), dense.K_delayed
 
     def path(self):
@@ -158,6 +166,13 @@ class _Delayed:
     def design(self, gain, params, extras):
         free = self.nodes.pattern(gain[1])
         return delayed_design(self.instance, params, self.nodes.local(gain[0]), gain[1], extras=extras, free=free)
+
+
+def gain_model(instance, info_model: str):
+    """The static gain of ``info_model`` on ``instance``, as the budget searches use it."""
+    if info_model not in INFO_MODELS:
+        raise ValueError(f"info_model must be one of {INFO_MODELS}, got {info_model!r}")
+    return _Instantaneous(instance) if info_model == "instantaneous" else _Delayed(instance)
 
 
 def _start(model, admissible, budget: int, gain):
@@ -242,17 +257,14 @@ def sparse_budget(
     """
     admissible = _admissible(instance)
     checked = check_budgets(budget_grid(instance) if links is None else links, int(admissible.sum()))
-    if info_model not in INFO_MODELS:
-        raise ValueError(f"info_model must be one of {INFO_MODELS}, got {info_model!r}")
-    model = _Instantaneous(instance) if info_model == "instantaneous" else _Delayed(instance)
-    decentral = DecentralizedCache(instance)
+    model = gain_model(instance, info_model)
     with Timer() as timer:
         dense, path = model.dense(), model.path()
     designs, previous = [], None
     for budget in checked:  # largest first: each warm-starts the next
         params = {"budget": budget, "info_model": info_model, "rounds": int(rounds)}
         with Timer() as step:
-            diagonal = decentral.usable()
+            diagonal = model.decentral.usable()
             if budget == 0 and info_model == "instantaneous" and diagonal is not None:
                 design = as_path_point(diagonal, "sparse_budget", params, {"solver": "decentralized"})
             else:

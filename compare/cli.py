@@ -347,17 +347,23 @@ def export(out, store_path, report_dir, fmt):
     click.echo(f"{len(frame)} designs, {frame.shape[1]} columns: {written}")
 
 
-@main.command()
-@click.option("--plugin", "plugins", multiple=True, metavar="MODULE_OR_FILE", help=_PLUGIN_HELP)
-def methods(plugins):
-    """List the registered design methods, their hyperparameters and defaults."""
+def _load_listed_plugins(plugins) -> None:
+    """Load the --plugin modules or files of a listing command (a bad one is a one-line error)."""
     from .plugins import PluginError, load_plugins, parse_plugin
-    from .registry import methods as registered_methods
 
     try:
         load_plugins([parse_plugin(ref) for ref in plugins])
     except PluginError as exc:
         raise UserError(str(exc)) from None
+
+
+@main.command()
+@click.option("--plugin", "plugins", multiple=True, metavar="MODULE_OR_FILE", help=_PLUGIN_HELP)
+def methods(plugins):
+    """List the registered design methods, their hyperparameters and defaults."""
+    from .registry import methods as registered_methods
+
+    _load_listed_plugins(plugins)
     for name, method in sorted(registered_methods().items()):
         click.echo(f"{name}  ({method.label}): {method.summary}")
         for h in method.hyperparameters.values():
@@ -388,12 +394,8 @@ def presets(name):
 def families(plugins):
     """List the instance families an [instances] table can name, and the fields 'where' filters on."""
     from .families import family_names, get_family
-    from .plugins import PluginError, load_plugins, parse_plugin
 
-    try:
-        load_plugins([parse_plugin(ref) for ref in plugins])
-    except PluginError as exc:
-        raise UserError(str(exc)) from None
+    _load_listed_plugins(plugins)
     for name in family_names():
         family = get_family(name)
         click.echo(f"{name}: {family.summary}")

@@ -223,7 +223,9 @@ def load_spec(name_or_path: str | Path, *, plugins=()) -> ExperimentSpec:
     ``plugins`` adds plug-in modules or files (as ``compare run --plugin``) to the spec's own.
     """
     text_path = Path(name_or_path)
-    if text_path.suffix == ".toml" or text_path.exists():
+    # A folder named like a preset (the repository's benchmarks/, say) does not hide the preset.
+    preset = text_path.is_dir() and str(name_or_path) in preset_names()
+    if not preset and (text_path.suffix == ".toml" or text_path.exists()):
         if not text_path.is_file():
             raise SpecError(f"spec file not found: {text_path}")
         text = _read_text(text_path)

@@ -87,6 +87,14 @@ def test_unknown_preset_and_missing_file(tmp_path):
         load_spec("nope")
     with pytest.raises(SpecError, match="spec file not found"):
         load_spec(tmp_path / "missing.toml")
+    with pytest.raises(SpecError, match="spec file not found"):
+        load_spec(tmp_path)  # a folder that is no preset
+
+
+def test_a_folder_named_like_a_preset_does_not_hide_it(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "quick").mkdir()
+    assert load_spec("quick").name == "quick"
 
 
 def test_default_validation_size_is_the_evaluators():

@@ -208,6 +208,18 @@ def _defect(A, B, Q, R, P):
     return F, K, A + B @ K, _relative(F, P)
 
 
+def _sda_step(A, G, H, identity):
+    """One doubling step: (A_{k+1}, G_{k+1}, H_{k+1})."""
+    import scipy.linalg
+
+    n = A.shape[0]
+    W = identity + G @ H
+    lu = scipy.linalg.lu_factor(W, overwrite_a=True, check_finite=False)
+    solved = scipy.linalg.lu_solve(lu, np.hstack([A, G]), check_finite=False)
+    WA, WG = solved[:, :n], solved[:, n:]
+    return A @ WA, _sym(G + A @ WG @ A.T), _sym(H + A.T @ (H @ WA))
+
+
 def _sda(A, G, H, max_steps: int):
     """Structure-preserving doubling: H_k -> the stabilizing solution. Returns (H, steps).
 
@@ -215,20 +227,12 @@ def _sda(A, G, H, max_steps: int):
     H_{k+1} = H_k + A_k' H_k W^{-1} A_k with W = I + G_k H_k, which is never singular
     for G_k, H_k positive semidefinite; A_k decays like A_cl^(2^k).
     """
-    import scipy.linalg
-
-    n = A.shape[0]
-    identity = np.eye(n)
+    identity = np.eye(A.shape[0])
     previous = np.inf
     for step in range(1, max_steps + 1):
-        W = identity + G @ H
-        lu = scipy.linalg.lu_factor(W, overwrite_a=True, check_finite=False)
-        solved = scipy.linalg.lu_solve(lu, np.hstack([A, G]), check_finite=False)
-        WA, WG = solved[:, :n], solved[:, n:]
-        H_next = _sym(H + A.T @ (H @ WA))
-        G = _sym(G + A @ WG @ A.T)
-        A = A @ WA
-        size = np.linalg.norm(H_next)
+        with np.errstate(over="ignore", invalid="ignore"):  # divergence is detected just below
+            A, G, H_next = _sda_step(A, G, H, identity)
+            size = np.linalg.norm(H_next)
         if not np.isfinite(size) or size > _SDA_OVERFLOW:
             raise NoStabilizingSolutionError(
                 f"no stabilizing solution: the doubling diverges (||H|| = {size:.3g} after {step} steps); "

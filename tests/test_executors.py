@@ -77,3 +77,67 @@ def test_local_workers_are_single_threaded_for_every_thread_pool(monkeypatch):
         pool.shutdown()
     assert env == {var: "1" for var in env}
     assert pools and all(threads == 1 for _, threads in pools), pools
+
+
+def _wait_for(path, seconds=60.0):
+    import time
+
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if path.exists() and path.stat().st_size:
+            return
+        time.sleep(0.2)
+    raise TimeoutError(f"{path} did not appear in {seconds} s")
+
+
+def test_separate_process_dask_cluster_matches_the_process_pool(tmp_path):
+    """`dask scheduler` + `dask worker` started by dask's own command-line tools, `compare run --executor dask://...`.
+
+    Everything as a user would start it, in separate processes; the store is the
+    same as the local process pool's, run for run.
+    """
+    import json
+    import os
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    pytest.importorskip("distributed")
+    dask = shutil.which("dask")
+    if dask is None:
+        pytest.skip("the `dask` command is not on PATH")
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")])))
+    spec = tmp_path / "dask.toml"
+    spec.write_text(SPEC)
+    scheduler_file = tmp_path / "scheduler.json"
+    started = []
+    try:
+        started.append(subprocess.Popen(
+            [dask, "scheduler", "--scheduler-file", str(scheduler_file), "--port", "0", "--no-dashboard",
+             "--host", "127.0.0.1"], cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        _wait_for(scheduler_file)
+        started.append(subprocess.Popen(
+            [dask, "worker", "--scheduler-file", str(scheduler_file), "--nworkers", "2", "--nthreads", "1",
+             "--no-dashboard"], cwd=root, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        address = json.loads(scheduler_file.read_text())["address"]
+        cli = [sys.executable, "-m", "compare.cli", "run", str(spec), "--no-progress"]
+        remote = subprocess.run(cli + ["--out", str(tmp_path / "remote"), "--executor",
+                                       address.replace("tcp://", "dask://")],
+                                cwd=root, env=env, capture_output=True, text=True, timeout=300)
+        assert remote.returncode == 0, remote.stderr[-2000:]
+        assert "12 computed" in remote.stdout, remote.stdout
+    finally:
+        for process in reversed(started):
+            process.terminate()
+        for process in reversed(started):
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+    local = subprocess.run(cli + ["--out", str(tmp_path / "local"), "--workers", "1"],
+                           cwd=root, env=env, capture_output=True, text=True, timeout=300)
+    assert local.returncode == 0, local.stderr[-2000:]
+    rows = _dump(tmp_path / "local" / "results.sqlite")
+    assert len(rows) == 12 and rows == _dump(tmp_path / "remote" / "results.sqlite")

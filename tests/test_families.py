@@ -120,11 +120,21 @@ def test_a_file_that_is_not_npz_is_named(tmp_path):
     ('family = "matrices"\nfiles = ["x.npz"]\nseeds = 3', "instances.seeds: unknown key (allowed: family, files)"),
     ('family = "mass_sprung"', "instances.family: unknown family 'mass_sprung' (known: chain, mass_spring, matrices, paper, platoon, random_network, swing_grid"),
     ('family = "paper"\nfiles = ["x.npz"]', "instances.files: unknown key"),
+    ('family = "paper"\nconnect = "glue"', "instances.connect: must be one of redraw, bridge, got 'glue'"),
 ])
 def test_instance_keys_are_validated_per_family(tmp_path, instances, message):
     with pytest.raises(SpecError) as info:
         parse_spec(f'name = "x"\n[instances]\n{instances}\n[[methods]]\nmethod = "lqr"\n', base=tmp_path)
     assert message in str(info.value)
+
+
+def test_bridged_paper_instances_carry_connect_and_can_be_filtered():
+    spec = parse_spec('name = "x"\n[instances]\nn = [8]\nseeds = 2\nconnect = "bridge"\n'
+                      '[[methods]]\nmethod = "lqr"\nwhere = { connect = ["bridge"], seed = [1] }\n')
+    assert [s["connect"] for s in spec.instances.expand()] == ["bridge", "bridge"]
+    assert [r.instance["seed"] for r in spec.runs()] == [1]
+    plain = parse_spec('name = "x"\n[instances]\nn = [8]\n[[methods]]\nmethod = "lqr"\n')
+    assert "connect" not in plain.instances.expand()[0]
 
 
 def test_where_filters_name_the_familys_fields(tmp_path):

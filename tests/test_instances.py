@@ -133,3 +133,54 @@ def test_paper_instances_do_not_depend_on_the_lapack_basis(monkeypatch, seed):
     np.testing.assert_allclose(other.A, reference.A, atol=1e-12)
     np.testing.assert_allclose(other.B, reference.B, atol=1e-12)
     assert np.array_equal(other.plant_adj, reference.plant_adj)
+
+
+def test_bridge_connects_a_large_draw_with_one_link_per_gap():
+    """At N = 600 the first draw's 6-NN graph is not connected; bridging adds one link per gap and keeps the rest."""
+    import scipy.sparse.csgraph
+
+    from codesign.instances import _knn_graph
+
+    rng = np.random.default_rng(0)
+    positions = rng.uniform(0.0, 1.0, 600)
+    knn = _knn_graph(positions, 6)
+    components, _ = scipy.sparse.csgraph.connected_components(knn, directed=False)
+    assert components > 1  # the case the rule exists for
+    instance = paper_instance(0, n=600, connect="bridge", horizon=5)
+    comm = instance.comm_adj
+    assert nx.is_connected(nx.from_numpy_array(comm))
+    added = comm - ((knn != 0) | np.eye(600, dtype=bool))
+    assert added.min() == 0 and np.array_equal(added, added.T)
+    assert added.sum() / 2 == components - 1
+    order = np.argsort(positions)
+    rank = np.empty(600, dtype=int)
+    rank[order] = np.arange(600)
+    i, j = np.nonzero(np.triu(added))
+    assert np.all(np.abs(rank[i] - rank[j]) == 1)  # each bridge joins neighbours in position
+    assert instance.spec["connect"] == "bridge"
+
+
+def test_redraw_is_the_default_and_stays_out_of_the_spec():
+    assert "connect" not in paper_instance(0).spec
+    assert paper_instance(0, connect="redraw").spec == paper_instance(0).spec
+    bridged = paper_instance(0, connect="bridge")  # at N = 20 the first draw may already be connected
+    assert bridged.spec["connect"] == "bridge"
+    with pytest.raises(InstanceError, match="connect must be one of redraw, bridge, got 'glue'"):
+        paper_instance(0, connect="glue")
+
+
+def test_large_instances_use_the_doubling_dare_and_it_agrees_with_scipy(monkeypatch):
+    import scipy.linalg
+
+    import codesign.instances as instances
+
+    reference = paper_instance(4, n=30)
+    calls = []
+    original = scipy.linalg.solve_discrete_are
+    monkeypatch.setattr(scipy.linalg, "solve_discrete_are", lambda *a: calls.append(1) or original(*a))
+    monkeypatch.setattr(instances, "FAST_DARE_ABOVE", 10)
+    fast = paper_instance(4, n=30)
+    assert not calls  # scipy's solver was not used above the threshold
+    assert np.linalg.norm(fast.P - reference.P) <= 1e-12 * np.linalg.norm(reference.P)
+    with pytest.raises(InstanceError, match="not stabilizable"):
+        Instance.from_matrices(np.diag(np.r_[1.5 * np.ones(11), 0.5]), np.diag(np.r_[np.zeros(11), 1.0]))

@@ -3,15 +3,19 @@
 Every (n, a_norm, seed) combination of the spec's lists is one instance; the
 other keys are shared. Keys and defaults: ``n = [20]``, ``a_norms = [0.995]``,
 ``seeds = 1`` (a count, or a list of seeds), ``degree = 6``, ``b_norm = 1.0``,
-``hops = 3``, ``horizon = 50``.
+``hops = 3``, ``horizon = 50``, ``connect = "redraw"`` (the paper's: positions drawn
+again until the graph is connected; ``"bridge"`` links across the gaps of the first
+draw instead, the only way past a few hundred nodes, and is then part of the spec).
 """
 
 from __future__ import annotations
 
+from codesign.instances import CONNECT_RULES
+
 from ..spec import SpecError, _check_keys, _list_of, _typed
 from . import Family, register_family
 
-KEYS = {"family", "n", "a_norms", "seeds", "degree", "b_norm", "hops", "horizon"}
+KEYS = {"family", "n", "a_norms", "seeds", "degree", "b_norm", "hops", "horizon", "connect"}
 
 
 def _seeds(value) -> tuple:
@@ -49,8 +53,12 @@ def parse(table: dict, base=None) -> tuple:
         raise SpecError(f"instances.hops: must be >= 0, got {shared['hops']}")
     if shared["b_norm"] <= 0:
         raise SpecError(f"instances.b_norm: must be positive, got {shared['b_norm']}")
+    connect = _typed("instances.connect", table.get("connect", "redraw"), str)
+    if connect not in CONNECT_RULES:
+        raise SpecError(f"instances.connect: must be one of {', '.join(CONNECT_RULES)}, got {connect!r}")
+    extra = {} if connect == "redraw" else {"connect": connect}
     return tuple({"family": "paper", "seed": seed, "n": n, "degree": shared["degree"], "a_norm": a_norm,
-                  "b_norm": shared["b_norm"], "hops": shared["hops"], "horizon": shared["horizon"]}
+                  "b_norm": shared["b_norm"], "hops": shared["hops"], "horizon": shared["horizon"], **extra}
                  for n in sizes for a_norm in a_norms for seed in seeds)
 
 
@@ -66,5 +74,5 @@ PAPER = register_family(Family(
     summary="the paper's random family: N nodes on a k-nearest-neighbour graph, A scaled to ||A||_2 = a_norm",
     parse=parse,
     build=build,
-    fields=frozenset({"seed", "n", "degree", "a_norm", "b_norm", "hops", "horizon"}),
+    fields=frozenset({"seed", "n", "degree", "a_norm", "b_norm", "hops", "horizon", "connect"}),
 ))

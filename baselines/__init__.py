@@ -3,7 +3,7 @@
 Public names::
 
     from baselines import lqr, autonomous, decentralized, polish_gain
-    from baselines import sls, sls_topologies, is_quadratically_invariant
+    from baselines import sls, sls_topologies, sls_local, is_quadratically_invariant
     from baselines import sparse_admm, sparse_sdp, truncated_lqr, sparse_delayed
     from baselines import sparse_budget, best_pattern     # exact link budgets, exhaustive search
     from baselines import gcnn, gcnn_batch, GCNNController   # the learned baseline, from codesign.learned
@@ -14,6 +14,7 @@ from .lqr import autonomous, decentralized, lqr
 from .polish import PolishResult, polish_gain
 from .qi import QIResult, is_quadratically_invariant
 from .sls import TOPOLOGY_FAMILY, SLSController, sls, sls_topologies, topology
+from .sls_local import sls_local
 from .sparse_admm import ADMM_GAMMAS, sparse_admm
 from .sparse_delayed import DelayedStaticGain, sparse_delayed
 from .sparse_sdp import SDP_GAMMAS, SparseSDP, sparse_sdp
@@ -29,6 +30,7 @@ __all__ = [
     "PolishResult",
     "sls",
     "sls_topologies",
+    "sls_local",
     "SLSController",
     "topology",
     "TOPOLOGY_FAMILY",

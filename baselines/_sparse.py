@@ -51,8 +51,8 @@ def pattern_of(K, instance=None) -> np.ndarray:
 
 
 def masked_grad_norm(instance, K, mask) -> tuple[float, float]:
-    """(normalized cost, norm of its gradient restricted to ``mask``)."""
-    cost, grad = static_gain_cost_and_grad(instance, K)
+    """(normalized cost, norm of its gradient restricted to ``mask``, the only entries computed)."""
+    cost, grad = static_gain_cost_and_grad(instance, K, mask=mask)
     return cost, float(np.linalg.norm(grad[mask]))
 
 

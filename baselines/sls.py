@@ -57,6 +57,13 @@ TOPOLOGY_FAMILY = ("given", "plant", "plant^2", "plant^3", "complete")
 # A solve whose normalized objective is this far from the realized closed loop's
 # exact cost did not really solve the QP (residuals in the dynamics).
 _REALIZATION_RTOL = 1e-5
+#: The most QP variables (allowed entries of the maps) `sls` poses. The compiled problem and
+#: Clarabel's factorization take 3-5 kB per variable (paper family at N = 100: 0.95 million
+#: variables, 4.9 GB, 25 s; the 10 x 10 swing grid's complete graph, 2.98 million: 8.6 GB,
+#: 206 s for its five graphs), so a larger problem would not fit a workstation's memory or
+#: finish in minutes: it is refused at once. `sls_local` solves the localized problem by
+#: columns at any size.
+MAX_QP_VARIABLES = 4_000_000
 # Normalized costs are >= 1; the autonomous system on this family is below 1e3.
 _ABSURD_OBJECTIVE = 1e8
 _GRAPH_NAME = re.compile(r"^(given|plant)(?:\^([1-9][0-9]*))?$")
@@ -184,6 +191,16 @@ def _psd_sqrt(M: np.ndarray) -> np.ndarray:
         return np.diag(np.sqrt(np.clip(np.diag(M), 0.0, None)))
     w, V = np.linalg.eigh((M + M.T) / 2)
     return (V * np.sqrt(np.clip(w, 0.0, None))) @ V.T
+
+
+def _variable_count(instance, dist, T, *, speed, act_delay, fir) -> int:
+    """Allowed entries of the maps X[1..T] (X[T] = 0 with ``fir``) and U[0..T-1]: the QP's variables."""
+    pairs = np.sort(dist[np.ix_(instance.state_nodes, instance.state_nodes)].ravel())
+    inputs = np.sort(dist[np.ix_(instance.input_nodes, instance.state_nodes)].ravel())
+    reach = [support_hops(t + 1, speed=speed, act_delay=act_delay) for t in range(T + 1)]
+    last = T if fir else T + 1  # X[T] = 0 in the FIR variant
+    return int(sum(np.searchsorted(pairs, reach[t], side="right") for t in range(1, last))
+               + sum(np.searchsorted(inputs, reach[t], side="right") for t in range(T)))
 
 
 def _solve_qp(instance, dist, T, *, speed, act_delay, fir):
@@ -339,14 +356,23 @@ def sls(
         "fir": None if fir is None else int(fir),
     }
     links, self_loops = count_links(adj)
+    dist = hop_distances(adj)
+    variables = _variable_count(instance, dist, T, speed=speed, act_delay=act_delay, fir=fir is not None)
+    if variables > MAX_QP_VARIABLES:
+        return Design.failure(
+            "sls", params, FAILED,
+            f"the joint SLS QP would have {variables:,} variables on {instance.n} states, above "
+            f"MAX_QP_VARIABLES = {MAX_QP_VARIABLES:,} (3-5 kB each: {variables * 3e-6:.0f}-{variables * 5e-6:.0f} GB); "
+            "sls_local solves the localized problem column by column at any size",
+            info_model="delayed", links=links, self_loops=self_loops,
+            extras={"variables": variables, "size_guard": True})
     qi = is_quadratically_invariant(instance, adj, speed=speed, act_delay=act_delay)
     extras = {"qi": qi.qi}
     if not qi.qi:
         extras["qi_pair"] = list(qi.pair)
 
     with Timer() as timer:
-        X, U, info = _solve_qp(instance, hop_distances(adj), T, speed=speed, act_delay=act_delay,
-                               fir=fir is not None)
+        X, U, info = _solve_qp(instance, dist, T, speed=speed, act_delay=act_delay, fir=fir is not None)
     extras.update({k: v for k, v in info.items() if k != "error"})
     raw = info["solver_status"]
     status = solver_status(raw)

@@ -309,7 +309,7 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
     design_ax.set_ylabel("method's own seconds per design (median over runs; 1 core)")
     design_ax.set_title("Design time per design")
     scoring_ax.set_ylabel("scoring seconds per design (median over runs)")
-    scoring_ax.set_title("Scoring time per design (cost evaluation, simulation)")
+    scoring_ax.set_title("Scoring time per design (instance, cost evaluation, simulation)")
     memory_ax.set_ylabel("peak resident memory of the worker (MB)")
     memory_ax.set_title("Peak memory per run (largest over runs)")
     # Memory spans less than a decade or two: label 1-2-5 steps in plain MB, not one power of ten.
@@ -386,8 +386,9 @@ def _caption(instances: dict) -> str:
         "seconds per design, log–log: "
         "for each run the sum of its designs' recorded seconds divided by the designs it returned (a γ or β path "
         "returns one per weight; batched learned runs share their batch's time equally), the median over runs. "
-        "Middle: the scoring seconds per design, the rest of the run's wall time (computing each design's cost: "
-        "closed form for linear controllers, simulation for learned ones), per design and median over runs. A "
+        "Middle: the scoring seconds per design, the rest of the run's wall time (building the instance, its "
+        "Riccati solve included, and computing each design's cost: closed form for linear controllers, "
+        "simulation for learned ones), per design and median over runs. A "
         "median of 0 s (a method that takes no measurable time, such as doing nothing) cannot be drawn on a "
         "log axis and is only in the table. Right: the largest peak "
         "resident memory of the worker process during a run, which includes the interpreter and the loaded "

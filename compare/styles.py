@@ -85,6 +85,8 @@ METHOD_STYLES: dict[str, tuple[str, str, str]] = {
     "sparse_sdp": ("#56B4E9", "s", "instantaneous"),
     "truncated_lqr": ("#332288", "D", "instantaneous"),
     "gcnn": ("#44AA99", "P", "instantaneous"),
+    "sparse_budget": ("#4477AA", "^", "instantaneous"),
+    "best_pattern": ("#009988", "*", "instantaneous"),
     # delayed: reds, oranges, purples
     "grnn_sparse": ("#D55E00", "o", "delayed"),
     "grnn_sparse_linear": ("#E69F00", "s", "delayed"),
@@ -99,6 +101,9 @@ METHOD_STYLES: dict[str, tuple[str, str, str]] = {
     "sls_plant^3": ("#AA3377", "H", "delayed"),
     "sls_given": ("#EE3377", "d", "delayed"),
     "sls_path": ("#994455", "8", "delayed"),
+    "sls_local": ("#CC6677", ">", "delayed"),
+    "sparse_budget_delayed": ("#EE7733", "^", "delayed"),
+    "best_pattern_delayed": ("#CC3311", "*", "delayed"),
     # no communication: greens and greys
     "decentralized": ("#117733", "h", "none"),
     "autonomous": ("#555555", "x", "none"),
@@ -123,14 +128,17 @@ _PLOTLY_SYMBOLS = {"o": "circle", "s": "square", "D": "diamond", "d": "diamond-t
 def style_key(method: str, params: Mapping | None = None) -> str:
     """The key of :data:`METHOD_STYLES` for a design of ``method`` with hyperparameters ``params``.
 
-    The activation of a GRNN (identity: a linear controller) and the graph of an SLS
-    design make different kinds of design; other hyperparameters (γ, β, steps) do not.
+    The activation of a GRNN (identity: a linear controller), the graph of an SLS
+    design and the information model of an exact-budget search make different kinds of
+    design; other hyperparameters (γ, β, steps) do not.
     """
     params = params or {}
     if method.startswith("grnn") and params.get("activation") == "identity":
         return f"{method}_linear"
     if method in ("sls", "sls_topologies"):
         return f"sls_{params.get('graph', 'plant')}"
+    if method in ("sparse_budget", "best_pattern") and params.get("info_model") == "delayed":
+        return f"{method}_delayed"
     return method
 
 

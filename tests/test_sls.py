@@ -366,3 +366,17 @@ def test_n100_fir_completes():
     design = sls(instance, fir=15)
     assert design.status == "optimal", design.message
     assert 1.0 - 1e-9 <= design.cost < 2.0
+
+
+def test_a_qp_too_large_is_refused_at_once_naming_the_way_out(inst, monkeypatch):
+    """The variable count is known before anything is built; past MAX_QP_VARIABLES the run is a failed design."""
+    for kwargs in ({}, {"fir": 10}, {"graph": "complete"}):
+        adj = topology(inst, kwargs.get("graph", "plant"))
+        counted = sls_module._variable_count(inst, hop_distances(adj), kwargs.get("fir", inst.horizon), speed=1.0,
+                                             act_delay=1, fir="fir" in kwargs)
+        assert counted == sls(inst, **kwargs).extras["variables"]
+    monkeypatch.setattr(sls_module, "MAX_QP_VARIABLES", 1000)
+    design = sls(inst)
+    assert design.status == "failed" and design.extras["size_guard"]
+    assert "the joint SLS QP would have 39,392 variables on 20 states, above MAX_QP_VARIABLES = 1,000" in design.message
+    assert "sls_local" in design.message and design.seconds < 1

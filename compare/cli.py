@@ -30,6 +30,7 @@ PRESET_TIMES = {
     "scale": "~21 min (1287 s measured)",
     "small": "~7 min (420 s measured)",
     "benchmark-systems": "~6.5 min (384 s measured)",
+    "scale-large": "~10 min (583 s measured, 577 s of runs)",
 }
 
 

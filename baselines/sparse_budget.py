@@ -219,7 +219,9 @@ def _pursue(model, admissible, budget: int, starts, rounds: int):
     return best, used
 
 
-@method("sparse_budget", label="Sparse K at exact budgets (GraSP)", node_blocks=True)
+@method("sparse_budget", label="Sparse K at exact budgets (GraSP)", node_blocks=True, max_states=300,
+        max_states_reason="it starts from the l1 ADMM path, whose iterations are dense N^3 solves: one γ takes "
+                          "about 19 minutes at 500 states")
 def sparse_budget(
     instance,
     *,

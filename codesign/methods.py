@@ -207,6 +207,13 @@ class Method:
         (:attr:`codesign.Instance.scalar_nodes` False). A method that does not is
         never called on such an instance: its run records a ``failed`` design
         saying so.
+    max_states : int, optional
+        The most states the method is run on through the registry (a spec, the CLI):
+        above it a run records, at once, a ``failed`` design giving
+        ``max_states_reason`` instead of an attempt that would take hours. Calling the
+        function itself runs it at any size.
+    max_states_reason : str
+        Why, with what was measured, e.g. ``"one γ takes 19 minutes at 500 states"``.
     """
 
     name: str
@@ -220,6 +227,8 @@ class Method:
     path_param: str | None = None
     modules: tuple = ()
     node_blocks: bool = False
+    max_states: int | None = None
+    max_states_reason: str = ""
 
     def __post_init__(self):
         unknown = set(self.produces) - set(PRODUCTS)
@@ -246,6 +255,8 @@ class Method:
         produces: tuple = (),
         path_param: str | None = None,
         node_blocks: bool = False,
+        max_states: int | None = None,
+        max_states_reason: str = "",
     ) -> "Method":
         """A method from a function's keyword-only parameters.
 
@@ -271,6 +282,8 @@ class Method:
             path_param=path_param,
             modules=modules,
             node_blocks=node_blocks,
+            max_states=max_states,
+            max_states_reason=max_states_reason,
         )
 
     def check_params(self, params: dict, where: str = "params") -> None:
@@ -296,6 +309,10 @@ class Method:
 
     def unsupported(self, instance, params: dict) -> list[Design] | None:
         """The recorded failure for an instance this method cannot handle, or None."""
+        if self.max_states is not None and instance.n > self.max_states:
+            return [Design.failure(self.name, dict(params), FAILED,
+                                   f"method {self.name!r} is not run on {instance.n} states (at most "
+                                   f"{self.max_states}): {self.max_states_reason}", extras={"size_guard": True})]
         if self.node_blocks or getattr(instance, "scalar_nodes", True):
             return None
         return [Design.failure(self.name, dict(params), FAILED,
@@ -541,6 +558,8 @@ def method(
     produces: tuple = (),
     path_param: str | None = None,
     node_blocks: bool = False,
+    max_states: int | None = None,
+    max_states_reason: str = "",
 ):
     """Decorator: register ``f(instance, *, ...)`` as a design method and return it unchanged.
 
@@ -555,14 +574,15 @@ def method(
     bind, exclude
         Keywords fixed to a value (``bind``) or hidden (``exclude``); neither is a
         hyperparameter. Lets one function serve several methods.
-    batch, batch_size, produces, path_param, node_blocks
+    batch, batch_size, produces, path_param, node_blocks, max_states, max_states_reason
         See :class:`Method`.
     """
 
     def decorate(func):
         register(Method.from_function(func, name=name, label=label, summary=summary, bind=bind, exclude=exclude,
                                       batch=batch, batch_size=batch_size, produces=produces,
-                                      path_param=path_param, node_blocks=node_blocks))
+                                      path_param=path_param, node_blocks=node_blocks,
+                                      max_states=max_states, max_states_reason=max_states_reason))
         return func
 
     return decorate

@@ -367,6 +367,8 @@ def methods(plugins):
     _load_listed_plugins(plugins)
     for name, method in sorted(registered_methods().items()):
         click.echo(f"{name}  ({method.label}): {method.summary}")
+        if method.max_states is not None:
+            click.echo(f"    runs on at most {method.max_states} states: {method.max_states_reason}")
         for h in method.hyperparameters.values():
             doc = h.doc if len(h.doc) <= 90 else h.doc[:89].rstrip() + "…"
             meaning = f"  {doc}" if doc else ""

@@ -104,3 +104,23 @@ def test_a_seed_changes_a_learned_design(instance):
     a = method(instance, **FAST["grnn"], seed=0)[0]
     b = method(instance, **FAST["grnn"], seed=1)[0]
     assert not np.allclose(a.controller.F, b.controller.F)
+
+
+def test_a_method_refuses_at_once_past_its_size(instance):
+    """Through the registry (spec, CLI), a method past its max_states records a failed design giving its reason."""
+    import dataclasses
+    import time
+
+    from compare.registry import get_method
+
+    admm = get_method("sparse_admm")
+    assert admm.max_states == 300 and "19 minutes at 500" in admm.max_states_reason
+    assert get_method("sparse_delayed").max_states == 200 and get_method("sparse_budget").max_states == 300
+    small = dataclasses.replace(admm, max_states=instance.n - 1)
+    start = time.perf_counter()
+    designs = small(instance, gammas=[0.01])
+    assert time.perf_counter() - start < 0.5
+    assert [d.status for d in designs] == ["failed"] and designs[0].extras["size_guard"]
+    assert designs[0].message.startswith(f"method 'sparse_admm' is not run on {instance.n} states (at most "
+                                         f"{instance.n - 1}): the ADMM path's iterations are dense")
+    assert all(d.status == "optimal" for d in admm(instance, gammas=[0.01]))  # within its size it runs

@@ -100,6 +100,19 @@ def support_hops(k: int, *, speed: float = 1.0, act_delay: int = 1) -> int:
     return max(0, math.floor(speed * (k - act_delay) + 1e-9))
 
 
+def checked_length(instance, speed, act_delay, horizon, fir) -> tuple[float, int]:
+    """The checked ``speed`` and the problem's length T: the FIR length, else the horizon, else the instance's."""
+    speed = _check_speed(speed)
+    if isinstance(act_delay, bool) or not isinstance(act_delay, (int, np.integer)) or act_delay < 0:
+        raise ValueError(f"act_delay must be a non-negative integer, got {act_delay!r}")
+    for label, value in (("horizon", horizon), ("fir", fir)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1):
+            raise ValueError(f"{label} must be a positive integer, got {value!r}")
+    if horizon is not None and fir is not None:
+        raise ValueError("give either horizon (finite-horizon problem) or fir (FIR variant), not both")
+    return speed, int(fir if fir is not None else (horizon if horizon is not None else instance.horizon))
+
+
 # -- the realization -------------------------------------------------------------
 @register_controller("sls")
 class SLSController:
@@ -329,14 +342,7 @@ def sls(
         ``"failed"``, with the reason. ``extras["qi"]`` says whether the delay
         constraints (``speed``, ``act_delay``) are quadratically invariant.
     """
-    speed = _check_speed(speed)
-    if isinstance(act_delay, bool) or not isinstance(act_delay, (int, np.integer)) or act_delay < 0:
-        raise ValueError(f"act_delay must be a non-negative integer, got {act_delay!r}")
-    for label, value in (("horizon", horizon), ("fir", fir)):
-        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1):
-            raise ValueError(f"{label} must be a positive integer, got {value!r}")
-    if horizon is not None and fir is not None:
-        raise ValueError("give either horizon (finite-horizon QP) or fir (FIR variant), not both")
+    speed, T = checked_length(instance, speed, act_delay, horizon, fir)
     if comm_adj is None:
         name = graph
         adj = topology(instance, graph)
@@ -347,7 +353,6 @@ def sls(
         if adj.shape != (N, N):
             raise ValueError(f"comm_adj must have shape {(N, N)} (one row per node), got {adj.shape}")
         adj = ((adj != 0) | np.eye(N, dtype=bool)).astype(float)
-    T = int(fir if fir is not None else (horizon if horizon is not None else instance.horizon))
     params = {
         "graph": name,
         "speed": speed,

@@ -38,8 +38,7 @@ from codesign.methods import Above, AtLeast, method
 from codesign.status import FAILED, INFEASIBLE, OPTIMAL
 
 from ._common import Timer
-from .qi import _check_speed
-from .sls import GRAPH_NAME, SLSController, support_hops, topology
+from .sls import GRAPH_NAME, SLSController, checked_length, support_hops, topology
 
 __all__ = ["sls_local", "solve_column"]
 
@@ -209,16 +208,9 @@ def sls_local(
         largest column size, the columns' solve seconds and the largest dynamics
         residual.
     """
-    speed = _check_speed(speed)
-    for label, value in (("locality", locality), ("act_delay", act_delay)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
-            raise ValueError(f"{label} must be a non-negative integer, got {value!r}")
-    for label, value in (("horizon", horizon), ("fir", fir)):
-        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1):
-            raise ValueError(f"{label} must be a positive integer, got {value!r}")
-    if horizon is not None and fir is not None:
-        raise ValueError("give either horizon (finite-horizon problem) or fir (FIR variant), not both")
-    T = int(fir if fir is not None else (horizon if horizon is not None else instance.horizon))
+    if isinstance(locality, bool) or not isinstance(locality, (int, np.integer)) or locality < 0:
+        raise ValueError(f"locality must be a non-negative integer, got {locality!r}")
+    speed, T = checked_length(instance, speed, act_delay, horizon, fir)
     params = {"locality": int(locality), "graph": graph, "speed": speed, "act_delay": int(act_delay),
               "horizon": None if fir is not None else T, "fir": None if fir is None else int(fir)}
     n, m = instance.n, instance.m

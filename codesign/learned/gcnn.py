@@ -323,7 +323,10 @@ def _finish(job: _Job, results, seconds) -> Design:
 
 # The runner hands gcnn_batch up to 25 runs at once: they train in shared stacks.
 @method("gcnn", label="GCNN", batch=gcnn_batch, batch_size=25, produces=("training_curve",),
-        node_blocks=True)
+        node_blocks=True, max_states=300,
+        max_states_reason="its graph filters are dense N x N products: one design takes 127 s at 200 states "
+                          "with the default settings (one thread), about 15 minutes at 500 by the growth N^2.2 "
+                          "measured from 20 to 100 states")
 @takes_settings(GCNNSettings)
 def gcnn(instance, *, seed: Annotated[int, AtLeast(0)] = 0, **settings) -> Design:
     """Gama-Sojoudi GCNN (192 parameters, instantaneous multi-hop information), trained as the paper did.

@@ -534,6 +534,22 @@ class _VariantBatch:
         return grnn_batch([(inst, {**params, "variant": self.variant}) for inst, params in pairs])
 
 
+#: Every variant is refused at once above this many states (one thread, default settings):
+#: one GRNN-Sparse design (β = 0.3) takes 86 s at 200 states and 416 s at 500, its l1 stage
+#: training a dense N x N S; a GRNN on the given graph 48 s at 200 and 149 s at 500, but more
+#: than 14 minutes at 1000, most of it scoring (the importance-sampled refinement's rollouts).
+MAX_STATES = 500
+_MAX_STATES_REASONS = {
+    "sparse": "its l1 stage trains a dense N x N S: one design takes 86 s at 200 states and 416 s at 500 with "
+              "the default settings, about half an hour at 1000 (products grow like N^2)",
+    "dense": "S is a dense N x N matrix: GRNN-Sparse's l1 stage, which trains the same, takes 416 s per design "
+             "at 500 states, about half an hour at 1000",
+    "given": "one design took 149 s at 500 states and more than 14 minutes at 1000 with the default settings, "
+             "most of it scoring (the rollouts of the importance-sampled refinement)",
+    "fixed": "as GRNN on the given graph: 149 s per design at 500 states, more than 14 minutes at 1000, most of "
+             "it scoring",
+}
+
 # One function, four methods: the variant is bound, and the co-design's own settings
 # are hidden from the other variants so that a spec setting them is an error naming the key.
 for _name, _variant, _label, _summary in (
@@ -546,5 +562,6 @@ for _name, _variant, _label, _summary in (
     method(_name, label=_label, summary=_summary, bind={"variant": _variant},
            exclude=() if _variant == "sparse" else _SPARSE_ONLY, batch=_VariantBatch(_variant), batch_size=25,
            node_blocks=True,
+           max_states=MAX_STATES, max_states_reason=_MAX_STATES_REASONS[_variant],
            produces=("training_curve", "topology_path") if _variant == "sparse" else ("training_curve",),
            path_param="beta" if _variant == "sparse" else None)(grnn)

@@ -202,11 +202,12 @@ def sls_local(
     Returns
     -------
     Design
-        ``links`` are the node pairs the maps use (at most ``locality`` hops apart),
-        information model ``"delayed"``. ``"infeasible"`` when some column cannot
-        meet the constraints (the message names its node); the extras give the
-        largest column size, the columns' solve seconds and the largest dynamics
-        residual.
+        ``links`` are the edges of ``graph``, which relay the information, as for
+        :func:`baselines.sls` (none at ``locality = 0``); information model
+        ``"delayed"``. ``"infeasible"`` when some column cannot meet the constraints
+        (the message names the first one's node and how many others); the extras give
+        the columns, the largest column's variables, the largest dynamics residual and
+        the infeasible columns' count.
     """
     if isinstance(locality, bool) or not isinstance(locality, (int, np.integer)) or locality < 0:
         raise ValueError(f"locality must be a non-negative integer, got {locality!r}")

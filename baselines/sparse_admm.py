@@ -183,11 +183,12 @@ def admm_gamma_max(instance) -> float:
 #: 200 states and 6.5 s per ADMM iteration at 500 (about 170 iterations per γ: 19 minutes, the
 #: 10-γ path 3 hours; 2026-11-26, one thread).
 MAX_STATES = 300
+MAX_STATES_REASON = ("the ADMM path's iterations are dense N^3 solves: one γ takes 14 s at 200 states and about "
+                     "19 minutes at 500 (the 10-γ path 3 hours)")
 
 
 @method("sparse_admm", label="Sparse K (l1 ADMM)", node_blocks=True, max_states=MAX_STATES,
-        max_states_reason="the ADMM path's iterations are dense N^3 solves: one γ takes 14 s at 200 states "
-                          "and about 19 minutes at 500 (the 10-γ path 3 hours)")
+        max_states_reason=MAX_STATES_REASON)
 def sparse_admm(
     instance,
     *,

@@ -41,6 +41,9 @@ from codesign.status import USABLE
 
 from ._common import Timer
 from ._sparse import DecentralizedCache, as_path_point, gain_design, polished_gain
+from .sparse_admm import MAX_STATES as ADMM_MAX_STATES
+from .sparse_admm import MAX_STATES_REASON as ADMM_MAX_STATES_REASON
+from .sparse_admm import sparse_admm
 from .sparse_delayed import _gain_design as delayed_design
 from .sparse_delayed import _Nodes as DelayedNodes
 from .sparse_delayed import delayed_closed_loop, delayed_gain_cost_and_grad, polish_delayed
@@ -99,8 +102,6 @@ class _Instantaneous:
 
     def path(self):
         """Gains of the ℓ1 ADMM path (:func:`baselines.sparse_admm`), a start for every budget."""
-        from .sparse_admm import sparse_admm
-
         return [d.controller.K for d in sparse_admm(self.instance) if d.status in USABLE]
 
     def grad_sizes(self, K):
@@ -219,9 +220,8 @@ def _pursue(model, admissible, budget: int, starts, rounds: int):
     return best, used
 
 
-@method("sparse_budget", label="Sparse K at exact budgets (GraSP)", node_blocks=True, max_states=300,
-        max_states_reason="it starts from the l1 ADMM path, whose iterations are dense N^3 solves: one γ takes "
-                          "about 19 minutes at 500 states")
+@method("sparse_budget", label="Sparse K at exact budgets (GraSP)", node_blocks=True, max_states=ADMM_MAX_STATES,
+        max_states_reason=f"it starts from the l1 ADMM path: {ADMM_MAX_STATES_REASON}")
 def sparse_budget(
     instance,
     *,

@@ -30,6 +30,7 @@ import numpy as np
 
 from .estimators import (MIN_CV_DRAWS, TiltedProposal, control_variate_estimate, fitted_cost_form, importance_estimate,
                          projected_relative_stderr)
+from .instances import FAST_DARE_ABOVE
 
 __all__ = [
     "static_gain_cost",
@@ -82,9 +83,8 @@ def spectral_radius(M) -> float:
 #: masked gradient computed on the mask's entries only (at n = 1000, T = 50: 1.7-2.4 s per
 #: cost and gradient instead of 10 s; ``benchmarks/bench_static_cost.py``). At and below it
 #: the dense formulas run unchanged, so that every number of the shipped reports (all at
-#: n <= 200) reproduces to the last digit; the same threshold as the instances' fast DARE
-#: (``FAST_DARE_ABOVE``).
-STRUCTURED_ABOVE = 200
+#: n <= 200) reproduces to the last digit: the instances' fast-DARE threshold, for that reason.
+STRUCTURED_ABOVE = FAST_DARE_ABOVE
 #: Largest fraction of nonzeros at which a matrix of the structured path is multiplied as
 #: scipy CSR rather than dense. CSR times dense costs n^2 x nnz-per-row multiply-adds at
 #: memory speed, BLAS n^3 at arithmetic speed: single-threaded at n = 1000, a banded CSR

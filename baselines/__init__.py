@@ -4,7 +4,7 @@ Public names::
 
     from baselines import lqr, autonomous, decentralized, polish_gain
     from baselines import sls, sls_topologies, sls_local, is_quadratically_invariant
-    from baselines import sparse_admm, sparse_sdp, truncated_lqr, sparse_delayed
+    from baselines import sparse_admm, sparse_newton, sparse_sdp, truncated_lqr, sparse_delayed
     from baselines import sparse_budget, best_pattern     # exact link budgets, exhaustive search
     from baselines import gcnn, gcnn_batch, GCNNController   # the learned baseline, from codesign.learned
 """
@@ -17,6 +17,7 @@ from .sls import TOPOLOGY_FAMILY, SLSController, sls, sls_topologies, topology
 from .sls_local import sls_local
 from .sparse_admm import ADMM_GAMMAS, sparse_admm
 from .sparse_delayed import DelayedStaticGain, sparse_delayed
+from .sparse_newton import sparse_newton
 from .sparse_sdp import SDP_GAMMAS, SparseSDP, sparse_sdp
 from .truncation import truncated_lqr
 from .sparse_budget import sparse_budget
@@ -37,6 +38,7 @@ __all__ = [
     "is_quadratically_invariant",
     "QIResult",
     "sparse_admm",
+    "sparse_newton",
     "sparse_delayed",
     "DelayedStaticGain",
     "ADMM_GAMMAS",

@@ -10,6 +10,7 @@ decentralized design, so it is taken from :func:`baselines.decentralized`.
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -18,11 +19,58 @@ from codesign.design import Design, count_links
 from codesign.evaluation import spectral_radius, static_gain_cost, static_gain_cost_and_grad
 from codesign.status import DIVERGED, INACCURATE, OPTIMAL, USABLE
 
+from ._common import Timer
 from .lqr import decentralized
 from .polish import GRAD_RTOL, polish_gain
 
 __all__ = ["GRAD_RTOL", "check_gammas", "pattern_of", "polished_gain", "gain_design",
-           "as_path_point", "design_on_pattern", "with_diagonal_end", "DecentralizedCache"]
+           "as_path_point", "design_on_pattern", "with_diagonal_end", "DecentralizedCache",
+           "GainPoint", "infinite_horizon_point", "l1_path"]
+
+_DOUBLINGS = 60        # A_cl^(2^60): only a gain at the stability boundary needs more
+_POWER_TOL = 1e-12     # max |A_cl^(2^k)| below which the remaining terms are negligible
+_WEIGHTS_SETTLED = 1e-2  # reweighting stops when the weights move less than this (relative)
+
+
+class GainPoint(NamedTuple):
+    """A stabilizing gain with its infinite-horizon cost J = trace(P), P, L and ∇J."""
+    K: np.ndarray
+    J: float
+    P: np.ndarray
+    L: np.ndarray
+    grad: np.ndarray
+
+
+def infinite_horizon_point(instance, K) -> GainPoint | None:
+    """J(K) = trace(P_K) and its gradient, or None when u = Kx does not stabilize.
+
+    P = A_cl' P A_cl + Q + K'RK and L = A_cl L A_cl' + I are summed by doubling
+    (Smith's squared iteration): both series share the powers A_cl^(2^k), and the
+    powers' decay doubles as the stability test, so a trial gain costs a few
+    dozen products instead of two Schur-based Lyapunov solves and an eigenvalue
+    problem (0.7 s at n = 1000, where scipy's Lyapunov solver takes 16 s).
+    ∇J = 2[(R + B'PB)K + B'PA] L. This is the objective of both ℓ1 paths
+    (lqrsp's, with x(0) ~ N(0, I) in the role of B₁B₁').
+    """
+    A, B, R = instance.A, instance.B, instance.R
+    M = A + B @ K
+    P = instance.Q + K.T @ R @ K
+    L = np.eye(A.shape[0])
+    with np.errstate(over="ignore", invalid="ignore"):
+        for _ in range(_DOUBLINGS):
+            P = P + M.T @ P @ M
+            L = L + M @ L @ M.T
+            M = M @ M
+            size = np.abs(M).max()
+            if not np.isfinite(size):
+                return None
+            if size < _POWER_TOL:
+                break
+        else:
+            return None  # too close to (or past) the stability boundary to sum
+    BtP = B.T @ P
+    grad = 2.0 * ((R + BtP @ B) @ K + BtP @ A) @ L
+    return GainPoint(K, float(np.trace(P)), P, L, grad)
 
 
 def check_gammas(gammas) -> np.ndarray:
@@ -169,3 +217,69 @@ class DecentralizedCache:
         if design.controller is None or not design.extras.get("spectral_radius", np.inf) < 1.0:
             return None
         return design
+
+
+#: What a weighted ℓ1 solver of :func:`l1_path` returns: its new state, the sparse gain whose
+#: pattern the γ stands for, iteration counts (extras, added over reweighting rounds) and
+#: whether it converged.
+WeightedSolve = Callable[[object, float, np.ndarray], tuple[object, np.ndarray, dict, bool]]
+
+
+def l1_path(instance, method: str, gammas, *, solve: WeightedSolve, start_state, base: dict, reweight: int,
+            eps_weight: float, polish: bool, diagonal_end: bool, solver: str, solver_label: str,
+            converged_key: str) -> list:
+    """The reweighted ℓ1 path shared by the static-gain solvers (ADMM, proximal Newton).
+
+    For each γ (increasing), up to ``reweight`` weighted solves ``solve(state, γ, W)``, after
+    each ``w_ij = 1/(|G_ij| + eps_weight)`` (block norms with node blocks), stopping early once
+    the weights settle; the weights carry over to the next γ, as in lqrsp, and the first solve
+    of the path is plain ℓ1. Each γ's gain is polished on its pattern and scored; a γ whose gain
+    does not give a usable design keeps the previous γ's (``fallback``), and the solver state
+    restarts from ``start_state`` when there is none.
+    """
+    N = instance.nodes
+    blocks = not instance.scalar_nodes
+    decentral = DecentralizedCache(instance)
+    state = start_state
+    W = np.ones((N, N))
+    np.fill_diagonal(W, 0.0)
+    previous = None  # (design, state, W) of the last γ with a usable design
+    designs = []
+    for gamma in gammas:
+        params = {**base, "gamma": float(gamma)}
+        with Timer() as timer:
+            counts: dict = {}
+            converged = True
+            rounds = 0
+            for rounds in range(1, reweight + 1):
+                state, G, its, ok = solve(state, gamma, W)
+                for key, value in its.items():
+                    counts[key] = counts.get(key, 0) + value
+                converged &= ok
+                W_new = 1.0 / ((instance.block_norms(G) if blocks else np.abs(G)) + eps_weight)
+                np.fill_diagonal(W_new, 0.0)
+                settled = np.linalg.norm(W_new - W) < _WEIGHTS_SETTLED * np.linalg.norm(W)
+                W = W_new
+                if settled:
+                    break
+            extras = {"solver": solver, **counts, "reweight_rounds": rounds, converged_key: bool(converged),
+                      "fallback": False}
+            design = None
+            if spectral_radius(instance.A + instance.B @ G) < 1.0:
+                design = design_on_pattern(instance, method, params, G, extras=extras, polish=polish,
+                                           decentral=decentral)
+                why = design.message
+            else:
+                why = f"the sparse gain G found by {solver_label} does not stabilize"
+            if design is not None and design.status in USABLE:
+                previous = (design, state, W.copy())
+            elif previous is not None:
+                # Keep the previous γ's solution and continue the path from it.
+                prev_design, state, W = previous
+                design = as_path_point(prev_design, method, params, {**extras, "fallback": True},
+                                       f"kept the previous gamma's gain: {why}")
+            else:
+                state = start_state
+                design = Design.failure(method, params, DIVERGED, why, info_model="instantaneous", extras=extras)
+        designs.append(replace(design, seconds=float(timer.seconds)))
+    return with_diagonal_end(designs, method, base, decentral) if diagonal_end else designs

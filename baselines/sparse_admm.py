@@ -30,18 +30,14 @@ design reports.
 
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import Annotated, NamedTuple
+from typing import Annotated
 
 import numpy as np
 
-from codesign.design import Design
 from codesign.evaluation import spectral_radius
 from codesign.methods import Above, AtLeast, NotEmpty, method
-from codesign.status import DIVERGED, USABLE
 
-from ._common import Timer
-from ._sparse import DecentralizedCache, as_path_point, check_gammas, design_on_pattern, with_diagonal_end
+from ._sparse import DecentralizedCache, check_gammas, infinite_horizon_point, l1_path
 
 __all__ = ["sparse_admm", "ADMM_GAMMAS", "admm_gamma_max"]
 
@@ -53,49 +49,7 @@ _ARMIJO = 1e-4        # sufficient-decrease constant of the line search
 _BACKTRACK = 0.5
 _MAX_BACKTRACKS = 40
 _KSTEP_MAXITER = 50
-_DOUBLINGS = 60        # A_cl^(2^60): only a gain at the stability boundary needs more
-_POWER_TOL = 1e-12     # max |A_cl^(2^k)| below which the remaining terms are negligible
 _REL_TOL = 1e-2        # relative part of the ADMM residual test (lqrsp's eps_rel)
-_WEIGHTS_SETTLED = 1e-2  # reweighting stops when the weights move less than this (relative)
-
-
-class _Point(NamedTuple):
-    """A stabilizing gain with its infinite-horizon cost J = trace(P), P, L and ∇J."""
-    K: np.ndarray
-    J: float
-    P: np.ndarray
-    L: np.ndarray
-    grad: np.ndarray
-
-
-def _evaluate(instance, K):
-    """J(K) = trace(P_K) and its gradient, or None when u = Kx does not stabilize.
-
-    P = A_cl' P A_cl + Q + K'RK and L = A_cl L A_cl' + I are summed by doubling
-    (Smith's squared iteration): both series share the powers A_cl^(2^k), and the
-    powers' decay doubles as the stability test, so a trial gain costs a few
-    dozen small products instead of two Schur-based Lyapunov solves and an
-    eigenvalue problem. ∇J = 2[(R + B'PB)K + B'PA] L.
-    """
-    A, B, R = instance.A, instance.B, instance.R
-    M = A + B @ K
-    P = instance.Q + K.T @ R @ K
-    L = np.eye(A.shape[0])
-    with np.errstate(over="ignore", invalid="ignore"):
-        for _ in range(_DOUBLINGS):
-            P = P + M.T @ P @ M
-            L = L + M @ L @ M.T
-            M = M @ M
-            size = np.abs(M).max()
-            if not np.isfinite(size):
-                return None
-            if size < _POWER_TOL:
-                break
-        else:
-            return None  # too close to (or past) the stability boundary to sum
-    BtP = B.T @ P
-    grad = 2.0 * ((R + BtP @ B) @ K + BtP @ A) @ L
-    return _Point(K, float(np.trace(P)), P, L, grad)
 
 
 def _stable(Acl) -> bool:
@@ -125,7 +79,7 @@ def _kstep(instance, point, U, rho, *, tol, maxiter):
             direction, slope = -grad, -np.sum(grad * grad)
         step = 1.0
         for _ in range(_MAX_BACKTRACKS):
-            trial = _evaluate(instance, K + step * direction)
+            trial = infinite_horizon_point(instance, K + step * direction)
             if trial is not None:  # unstable trial gains are never accepted
                 phi_trial = trial.J + 0.5 * rho * np.sum((trial.K - U) ** 2)
                 if phi_trial <= phi + _ARMIJO * step * slope:
@@ -140,12 +94,6 @@ def _kstep(instance, point, U, rho, *, tol, maxiter):
 def _shrink(V, threshold):
     """Weighted soft-thresholding; ``threshold`` is zero on the diagonal."""
     return np.sign(V) * np.maximum(np.abs(V) - threshold, 0.0)
-
-
-def _offdiag_ones(n):
-    W = np.ones((n, n))
-    np.fill_diagonal(W, 0.0)
-    return W
 
 
 def _group_shrink(instance, V, threshold):
@@ -166,7 +114,7 @@ def admm_gamma_max(instance) -> float:
     Reweighting makes paths diagonal well below this value.
     """
     diagonal = DecentralizedCache(instance).usable()
-    point = None if diagonal is None else _evaluate(instance, np.array(diagonal.controller.K))
+    point = None if diagonal is None else infinite_horizon_point(instance, np.array(diagonal.controller.K))
     if point is None:
         raise ValueError("no stabilizing diagonal gain on this instance")
     if instance.scalar_nodes:
@@ -260,7 +208,7 @@ def sparse_admm(
     single points, by 1.5e-4 to 5.7e-3 in cost. Plain ℓ1 (``reweight=1``) also misses
     on 3 of 60 (other instances), by 1.4e-4 to 3.7e-3.
     """
-    n, m, N = instance.n, instance.m, instance.nodes
+    n, m = instance.n, instance.m
     blocks = not instance.scalar_nodes
     gammas = check_gammas(ADMM_GAMMAS if gammas is None else gammas)
     for label, value in (("rho", rho), ("eps_weight", eps_weight), ("tol", tol), ("kstep_tol", kstep_tol)):
@@ -273,7 +221,7 @@ def sparse_admm(
     K = np.array(instance.K_lqr if start is None else start, dtype=float)
     if K.shape != (m, n) or not np.all(np.isfinite(K)):
         raise ValueError(f"start must be a finite ({m}, {n}) gain, got shape {K.shape}")
-    start_point = _evaluate(instance, K)
+    start_point = infinite_horizon_point(instance, K)
     if start_point is None or not _stable(instance.A + instance.B @ K):
         raise ValueError(
             f"start gain does not stabilize the instance (spectral radius "
@@ -282,52 +230,15 @@ def sparse_admm(
 
     base = {"reweight": int(reweight), "rho": float(rho)}
     scale = instance.trace_P  # the ADMM itself runs on trace(P_K), as in lqrsp
-    decentral = DecentralizedCache(instance)
-    point, G, Lam = start_point, K.copy(), np.zeros((m, n))
-    # Weights carry along the path as in lqrsp: an entry zeroed at one γ starts the
-    # next γ heavily penalized. With node blocks, one weight per block.
-    W = _offdiag_ones(N)
-    previous = None  # (design, point, G, Lam, W) of the last γ with a usable design
-    designs = []
-    for gamma in gammas:
-        params = {**base, "gamma": float(gamma)}
-        with Timer() as timer:
-            admm_iters = kstep_iters = rounds = 0
-            converged = True
-            for rounds in range(1, reweight + 1):
-                point, G, Lam, its, kits, ok = _admm(instance, point, G, Lam, scale * gamma * W / rho, rho,
-                                                 tol=tol, kstep_tol=kstep_tol, maxiter=maxiter, blocks=blocks)
-                admm_iters += its
-                kstep_iters += kits
-                converged &= ok
-                W_new = 1.0 / ((instance.block_norms(G) if blocks else np.abs(G)) + eps_weight)
-                np.fill_diagonal(W_new, 0.0)
-                settled = np.linalg.norm(W_new - W) < _WEIGHTS_SETTLED * np.linalg.norm(W)
-                W = W_new
-                if settled:
-                    break
-            extras = {"solver": "admm", "admm_iterations": admm_iters, "kstep_iterations": kstep_iters,
-                      "reweight_rounds": rounds, "admm_converged": bool(converged), "fallback": False}
-            design = None
-            if _stable(instance.A + instance.B @ G):
-                design = design_on_pattern(instance, "sparse_admm", params, G, extras=extras,
-                                           polish=polish, decentral=decentral)
-                why = design.message
-            else:
-                why = "the sparse gain G found by ADMM does not stabilize"
-            if design is not None and design.status in USABLE:
-                previous = (design, point, G.copy(), Lam.copy(), W.copy())
-            elif previous is not None:
-                # Keep the previous γ's solution and continue the path from it.
-                prev_design, point, G, Lam, W = previous
-                design = as_path_point(prev_design, "sparse_admm", params, {**extras, "fallback": True},
-                                       f"kept the previous gamma's gain: {why}")
-            else:
-                point, G, Lam = start_point, start_point.K.copy(), np.zeros((m, n))
-                design = Design.failure("sparse_admm", params, DIVERGED, why, info_model="instantaneous",
-                                        extras=extras)
-        designs.append(replace(design, seconds=float(timer.seconds)))
-    return with_diagonal_end(designs, "sparse_admm", base, decentral) if diagonal_end else designs
+
+    def solve(state, gamma, W):
+        point, G, Lam, its, kits, ok = _admm(instance, *state, scale * gamma * W / rho, rho, tol=tol,
+                                             kstep_tol=kstep_tol, maxiter=maxiter, blocks=blocks)
+        return (point, G, Lam), G, {"admm_iterations": its, "kstep_iterations": kits}, ok
+
+    return l1_path(instance, "sparse_admm", gammas, solve=solve, start_state=(start_point, K.copy(), np.zeros((m, n))),
+                   base=base, reweight=reweight, eps_weight=eps_weight, polish=polish, diagonal_end=diagonal_end,
+                   solver="admm", solver_label="ADMM", converged_key="admm_converged")
 
 
 def _admm(instance, point, G, Lam, threshold, rho, *, tol, kstep_tol, maxiter, blocks=False):

@@ -41,11 +41,11 @@ import numpy as np
 from scipy import stats
 
 from .records import Records, as_records
-from .statistics import Paired, best_within, instances_by_panel, paired_difference
+from .statistics import Paired, best_within, instances_by_panel, paired_difference, panel_budgets, panel_nodes
 from .styles import Style, style_for
 
 __all__ = ["UNCERTAIN_RSE", "BOUND_LABEL", "ALPHA", "Comparison", "is_unresolved", "unresolved", "is_sls_bound",
-           "select_comparisons", "holm", "sign_test"]
+           "select_comparisons", "holm", "sign_test", "budgets_per_node"]
 
 #: Above this relative standard error a simulated cost is unresolved: not a number to compare
 #: at the third digit (in the shipped reports every such cost came from rare divergent draws).
@@ -54,7 +54,8 @@ UNCERTAIN_RSE = 0.01
 BOUND_LABEL = "SLS bound (complete graph)"
 #: Family-wise level of the Holm-adjusted sign tests.
 ALPHA = 0.05
-DEFAULT_BUDGETS = (20, 60, 140, None)
+#: In a plan, "each panel's own budgets" (:func:`compare.statistics.panel_budgets`, or the caller's).
+_PANEL_BUDGETS = "budgets"
 
 # Learned designs with the delayed information model, in the order the findings list them.
 _LEARNED = ("grnn_sparse", "grnn", "grnn_dense", "grnn_fixed")
@@ -184,6 +185,9 @@ class Comparison:
     style_a : Style or None
         a's style from what its designs are (:func:`compare.styles.style_for`): the
         figure's fallback for labels split here, which a report's label styles lack.
+    per_node : float or None
+        ``budget`` per node of the panel (None: any, or no node count known): the forest
+        plot's row where panels of different sizes have different budgets.
     """
 
     panel: tuple
@@ -202,6 +206,7 @@ class Comparison:
     method_a: str = ""
     method_b: str = ""
     style_a: Style | None = None
+    per_node: float | None = None
 
     @property
     def too_few(self) -> bool:
@@ -250,8 +255,12 @@ def _resolve(name: str, arms: Mapping[str, _Arm]) -> list[str]:
     return split or [a.label for a in arms.values() if a.method == name][:1]
 
 
-def _plan(arms: Mapping[str, _Arm], budgets: tuple, pairs: Iterable) -> list[tuple[str, str, tuple, str]]:
-    """(a, b, budgets, group) of every comparison asked, in the order the findings list them."""
+def _plan(arms: Mapping[str, _Arm], pairs: Iterable) -> list[tuple[str, str, object, str]]:
+    """(a, b, budgets, group) of every comparison asked, in the order the findings list them.
+
+    ``budgets`` is ``(None,)`` (any number of links) or :data:`_PANEL_BUDGETS`.
+    """
+    budgets = _PANEL_BUDGETS
     def by_method(*methods, linear=None):
         return [a.label for a in arms.values()
                 if a.method in methods and (linear is None or a.linear == linear) and a.label != BOUND_LABEL]
@@ -309,21 +318,23 @@ def _panel_order(panel: tuple) -> tuple:
     return (family, n, -math.inf if a_norm is None else a_norm)
 
 
-def _tables(records: Records, labels: list[str], panels: dict, grid: np.ndarray) -> dict:
+def _tables(records: Records, labels: list[str], panels: dict, grids: dict) -> dict:
     grouped: dict[tuple, list] = {}
     for r, label in zip(records, labels):
         grouped.setdefault((r.instance.panel, label), []).append(r)
-    return {key: best_within(Records(rs), panels[key[0]], grid) for key, rs in grouped.items()}
+    return {key: best_within(Records(rs), panels[key[0]], grids[key[0]]) for key, rs in grouped.items()}
 
 
-def select_comparisons(records, *, budgets=DEFAULT_BUDGETS, pairs=()) -> list[Comparison]:
+def select_comparisons(records, *, budgets=None, pairs=()) -> list[Comparison]:
     """The comparisons a researcher asks of these data, per panel and budget, with Holm-adjusted sign tests.
 
     Parameters
     ----------
     records : Records or iterable of dict
-    budgets : tuple of (float or None)
-        Link budgets; None: any number of links. Comparisons against the SLS bound
+    budgets : tuple of (float or None), optional
+        Link budgets, the same in every panel; None in it: any number of links. By
+        default each panel's own, 1, 3 and 7 links per node and any
+        (:func:`compare.statistics.panel_budgets`). Comparisons against the SLS bound
         and of the GCNN use "any" alone.
     pairs : iterable of (str, str)
         Extra (first, second) pairs (labels or method names, as a spec's
@@ -340,19 +351,22 @@ def select_comparisons(records, *, budgets=DEFAULT_BUDGETS, pairs=()) -> list[Co
     labels = _arm_labels(records)
     arms = _arms(records, labels)
     panels = instances_by_panel(records)
-    grid = np.array([np.inf if b is None else float(b) for b in budgets])
-    column = {b: k for k, b in enumerate(budgets)}
-    full = _tables(records, labels, panels, grid)
+    by_panel = records.by_panel
+    panel_grid = {p: tuple(budgets) if budgets is not None else panel_budgets(by_panel[p]) for p in panels}
+    panel_node_count = {p: panel_nodes(by_panel[p]) for p in panels}
+    grids = {p: np.array([np.inf if b is None else float(b) for b in g]) for p, g in panel_grid.items()}
+    full = _tables(records, labels, panels, grids)
     keep = [not is_unresolved(r) for r in records]
     kept = _tables(Records(r for r, k in zip(records, keep) if k), [x for x, k in zip(labels, keep) if k],
-                   panels, grid)
-    plan = sorted(_plan(arms, tuple(budgets), pairs), key=lambda item: _group_rank(item[3]))
+                   panels, grids)
+    plan = sorted(_plan(arms, pairs), key=lambda item: _group_rank(item[3]))
     out = []
     for a, b, pair_budgets, group in plan:
         for panel in sorted(panels, key=_panel_order):
             if (panel, a) not in full or (panel, b) not in full:
                 continue
-            for budget in pair_budgets:
+            column = {b: k for k, b in enumerate(panel_grid[panel])}
+            for budget in panel_grid[panel] if pair_budgets == _PANEL_BUDGETS else pair_budgets:
                 if budget not in column:
                     continue
                 k = column[budget]
@@ -362,11 +376,23 @@ def select_comparisons(records, *, budgets=DEFAULT_BUDGETS, pairs=()) -> list[Co
                     continue
                 paired, excluded = out_k
                 ia, ib = arms[a].info_model, arms[b].info_model
+                nodes = panel_node_count[panel]
+                per_node = None if budget is None or not nodes else budget / nodes
                 out.append(Comparison(panel, a, b, budget, paired, "same" if ia == ib else "cross", ia, ib,
                                       sign_test(paired.a_wins, paired.b_wins), 1.0, excluded, group,
-                                      len(panels[panel]), arms[a].method, arms[b].method, arms[a].style))
+                                      len(panels[panel]), arms[a].method, arms[b].method, arms[a].style,
+                                      per_node))
     adjusted = holm([c.p_value for c in out])
     return [replace(c, p_holm=p) for c, p in zip(out, adjusted)]
+
+
+def budgets_per_node(comparisons: Sequence[Comparison]) -> bool:
+    """Whether budgets are best told per node: panels of different sizes put one tier at different link counts."""
+    budgets: dict = {}
+    for c in comparisons:
+        if c.per_node is not None:
+            budgets.setdefault(c.per_node, set()).add(c.budget)
+    return any(len(values) > 1 for values in budgets.values())
 
 
 def _compare(a, b, budget, kept, full, k):

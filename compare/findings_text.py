@@ -13,7 +13,7 @@ from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .findings import ALPHA, BOUND_LABEL, UNCERTAIN_RSE, Comparison
+from .findings import ALPHA, BOUND_LABEL, UNCERTAIN_RSE, Comparison, budgets_per_node
 
 __all__ = ["findings_markdown"]
 
@@ -127,10 +127,11 @@ def _in_panels(panels: Sequence[tuple], names: Mapping, every: bool = True) -> s
     return f" in {len(panels)} of {total} panels"
 
 
-def _budgets_phrase(budgets: Sequence) -> str:
-    """"at ≤ 20 and ≤ 60 links and overall" (overall: any number of links)."""
+def _budgets_phrase(budgets: Sequence, per_node: bool = False) -> str:
+    """"at ≤ 20 and ≤ 60 links and overall" (overall: any number of links); "links per node" with ``per_node``."""
     finite = [f"≤ {b:g}" for b in budgets if b is not None]
-    text = f"at {_join(finite)} links" if finite else ""
+    unit = "link" if [b for b in budgets if b is not None] == [1] else "links"
+    text = f"at {_join(finite)} {unit}{' per node' if per_node else ''}" if finite else ""
     if None in budgets:
         text += (" and " if text else "") + "overall"
     return text
@@ -143,14 +144,20 @@ def _where(cells: Sequence[Comparison], names: Mapping, every: bool = True) -> s
     trailing sentences of a bullet, after its headline has said how many panels there are.
     """
     order = list(names)
+    per_node = budgets_per_node(cells)
     held: dict = {}
     for c in cells:
-        held.setdefault(c.budget, set()).add(c.panel)
+        held.setdefault(_tier(c, per_node), set()).add(c.panel)
     groups: dict[tuple, list] = {}
     for budget, panels in held.items():
         groups.setdefault(tuple(p for p in order if p in panels), []).append(budget)
     ranked = sorted(groups.items(), key=lambda item: -len(item[0]))
-    return _join([_budgets_phrase(budgets) + _in_panels(panels, names, every) for panels, budgets in ranked])
+    return _join([_budgets_phrase(budgets, per_node) + _in_panels(panels, names, every) for panels, budgets in ranked])
+
+
+def _tier(c: Comparison, per_node: bool):
+    """A cell's budget as the findings name it: links, or links per node where panels differ in size."""
+    return c.per_node if per_node else c.budget
 
 
 def _scope(lead: Sequence[Comparison], cells: Sequence[Comparison], names: Mapping) -> str:
@@ -158,11 +165,12 @@ def _scope(lead: Sequence[Comparison], cells: Sequence[Comparison], names: Mappi
     mine = {id(c) for c in lead}
     rest = [c for c in cells if id(c) not in mine]
     odd = {c.panel for c in rest}
-    budgets = list(dict.fromkeys(c.budget for c in cells))
+    per_node = budgets_per_node(cells)
+    budgets = list(dict.fromkeys(_tier(c, per_node) for c in cells))
     others = {p for p in names if p not in odd}
-    complete = all(any(c.panel == p and c.budget == b for c in lead) for p in others for b in budgets)
+    complete = all(any(c.panel == p and _tier(c, per_node) == b for c in lead) for p in others for b in budgets)
     if len(odd) == 1 and len(names) >= 3 and complete:
-        return f"{_budgets_phrase(budgets)} in every panel but one"
+        return f"{_budgets_phrase(budgets, per_node)} in every panel but one"
     return _where(lead, names)
 
 

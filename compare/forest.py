@@ -19,7 +19,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter  # noqa: E402
 from matplotlib.transforms import blended_transform_factory  # noqa: E402
 
-from .findings import BOUND_LABEL, X_CAP, Comparison  # noqa: E402
+from .findings import BOUND_LABEL, X_CAP, Comparison, budgets_per_node  # noqa: E402
 from .statistics import panel_title  # noqa: E402
 from .styles import BOUND_COLOUR  # noqa: E402
 
@@ -32,13 +32,17 @@ def _num(x: float) -> str:
     """A forest-plot annotation: three significant digits."""
     return f"{x:+,.0f}" if abs(x) >= 100 else f"{x:+.3g}"
 
-def _rows(comparisons: Sequence[Comparison]):
+def _row(c: Comparison, by_node: bool):
+    return c.per_node if by_node else c.budget
+
+
+def _rows(comparisons: Sequence[Comparison], by_node: bool = False):
     """Figure layout: [(group, [((a, b), [budgets])])] in the order of ``comparisons``."""
     layout: dict[str, dict[tuple, list]] = {}
     for c in comparisons:
         budgets = layout.setdefault(c.group, {}).setdefault((c.a, c.b), [])
-        if c.budget not in budgets:
-            budgets.append(c.budget)
+        if _row(c, by_node) not in budgets:
+            budgets.append(_row(c, by_node))
     # Budgets in increasing order whichever panel met them first (None, any number of links, last).
     return [(group, [(pair, sorted(budgets, key=_budget_order)) for pair, budgets in pairs.items()])
             for group, pairs in layout.items()]
@@ -48,8 +52,10 @@ def _budget_order(budget) -> float:
     return float("inf") if budget is None else float(budget)
 
 
-def _budget_text(budget) -> str:
-    return "any" if budget is None else f"≤ {budget:g}"
+def _budget_text(budget, by_node: bool = False) -> str:
+    if budget is None:
+        return "any"
+    return f"≤ {budget:g}/node" if by_node else f"≤ {budget:g}"
 
 
 def _symlog_axis(ax, values) -> float:
@@ -86,6 +92,9 @@ def _symlog_axis(ax, values) -> float:
 def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None):
     """Forest plot of the comparisons: one column per panel, one row per (pair, budget).
 
+    Where panels of different sizes have different budgets (1, 3 and 7 links per node
+    by default), a row is a budget per node ("≤ 3/node") and holds each panel's own.
+
     Each row shows the median paired difference a − b (LQR-normalized cost) with its
     distribution-free interval as a bar, in ``a``'s colour and marker; the marker is
     filled where the interval excludes 0 and the Holm-adjusted sign test has p < 0.05,
@@ -107,7 +116,8 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
     (Figure, list of Axes)
     """
     panels = list(dict.fromkeys(c.panel for c in comparisons))
-    layout = _rows(comparisons)
+    by_node = budgets_per_node(comparisons)
+    layout = _rows(comparisons, by_node)
     # y positions, top to bottom: a heading slot per group, then each pair's budget rows.
     y, row_y, headings, blocks = 0.0, {}, [], []
     for group, pairs in layout:
@@ -138,7 +148,7 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
         axes = list(np.ravel(axes))
         fig = axes[0].figure
     values = [v for c in comparisons for v in (c.paired.low, c.paired.high, c.paired.median)]
-    ends = {(c.group, (c.a, c.b), c.budget, c.panel): c for c in comparisons}
+    ends = {(c.group, (c.a, c.b), _row(c, by_node), c.panel): c for c in comparisons}
     for ax, panel in zip(axes, panels):
         edge = _symlog_axis(ax, values)
         for i, (_, start, stop) in enumerate(blocks):
@@ -159,7 +169,7 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
         ax.set_xlabel("Δ cost, first − second", fontsize=8)
     first = axes[0]
     first.set_ylim(total + 0.2, 0.0)
-    first.set_yticks([ry for ry in row_y.values()], [_budget_text(b) for (_, _, b) in row_y], fontsize=8)
+    first.set_yticks([ry for ry in row_y.values()], [_budget_text(b, by_node) for (_, _, b) in row_y], fontsize=8)
     for ax in axes[1:]:
         ax.tick_params(axis="y", left=False, labelleft=False)
     left = blended_transform_factory(fig.transFigure, first.transData)

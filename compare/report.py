@@ -33,7 +33,7 @@ from .report_sections import delayed_section, experiments_with, learning_section
 from .report_tables import (_asked_pairs, _budget_tables, _environment_lines, _fingerprint_lines, _paired_lines,  # noqa: E402
                             _pareto_tables, _precision_text, _summary_tables, _systems_table, _uncertain_text,
                             software_versions)
-from .statistics import best_tables, budget_fronts, panel_title  # noqa: E402
+from .statistics import best_tables, budget_fronts, panel_budgets, panel_title  # noqa: E402
 from .styles import label_styles  # noqa: E402
 
 __all__ = [
@@ -57,16 +57,21 @@ INFO_STYLE = {info: {"linestyle": style, "description": text} for info, (style, 
 _GRAPH_NAMES = {"plant^2": "plant² graph", "plant^3": "plant³ graph"}
 
 
-def budget_costs(records, budgets=(20, 60, 140, None)) -> dict:
+def budget_costs(records, budgets=None) -> dict:
     """Per (panel, label): median over instances of the best cost within each link budget.
 
     For each instance, a method's best cost under budget b is the lowest cost among
     its designs with at most b links (None = any number); instances where no design
-    fits count as missing. Returns ``{(panel, label): [(median, instances), ...]}``.
+    fits count as missing. ``budgets`` default to each panel's own (1, 3 and 7 links
+    per node, then any: :func:`compare.statistics.panel_budgets`). Returns
+    ``{(panel, label): [(median, instances), ...]}``, one pair per budget.
     """
-    grid = [np.inf if b is None else b for b in budgets]
-    return {key: [(quartiles(column)[1], int(np.isfinite(column).sum())) for column in best.T]
-            for key, best in best_tables(records, grid).items() if np.isfinite(best).any()}
+    out = {}
+    for _, in_panel in sorted(as_records(records).by_panel.items()):
+        grid = [np.inf if b is None else b for b in (panel_budgets(in_panel) if budgets is None else budgets)]
+        out.update({key: [(quartiles(column)[1], int(np.isfinite(column).sum())) for column in best.T]
+                    for key, best in best_tables(in_panel, grid).items() if np.isfinite(best).any()})
+    return out
 
 
 def plant_links(records) -> dict:

@@ -17,7 +17,7 @@ from .cost_links import Point, pareto_front
 from .findings import UNCERTAIN_RSE, unresolved
 from .meta import StoreMeta
 from .records import OK_STATUSES, Records
-from .statistics import best_tables, covered_quantiles, paired_comparisons, panel_title
+from .statistics import best_tables, covered_quantiles, paired_comparisons, panel_budgets, panel_title
 
 _PACKAGES = ("grnn-codesign", "numpy", "scipy", "cvxpy", "clarabel", "scs", "control", "torch", "numba", "networkx",
              "matplotlib", "plotly")
@@ -107,21 +107,6 @@ def _systems_table(records: Records) -> list[str]:
             "open-loop spectral radius |", "|---|---:|---:|---:|---:|---:|---:|---:|", *rows, "",
             "Links are directed and off-diagonal, between nodes; where instances differ, the median and the range "
             "[lowest, highest]. A node without an actuator keeps its states and its links.", ""]
-
-
-#: The budget table's columns, in links per node: 20, 60 and 140 links at the paper's N = 20,
-#: the same share of the possible links at every size (a fixed 140 links would be "no links"
-#: at N = 1000 and "all links" at N = 4).
-BUDGETS_PER_NODE = (1, 3, 7)
-
-
-def panel_budgets(records: Records) -> tuple:
-    """The budget table's budgets for one panel: :data:`BUDGETS_PER_NODE` times its node count, and any."""
-    nodes = [i.nodes for i in records.instances if i.nodes]
-    if not nodes:
-        return (20, 60, 140, None)
-    n = int(np.median(nodes))
-    return tuple(k * n for k in BUDGETS_PER_NODE) + (None,)
 
 
 def _budget_tables(records: Records) -> list[str]:

@@ -23,7 +23,8 @@ from scipy import stats
 from .records import OK_STATUSES, as_records, panel_key
 
 __all__ = ["Front", "budget_fronts", "best_within", "best_tables", "Paired", "paired_difference", "median_interval",
-           "paired_comparisons", "instances_by_panel", "covered_quantiles", "panel_key", "panel_title", "OK_STATUSES"]
+           "paired_comparisons", "instances_by_panel", "covered_quantiles", "panel_key", "panel_title", "OK_STATUSES",
+           "panel_budgets", "panel_nodes", "BUDGETS_PER_NODE"]
 
 # Quantiles of values that may be infinite: replace inf by a huge sentinel, so that a
 # median between a finite and an infinite value reads as "not reached" (inf).
@@ -210,24 +211,47 @@ def paired_difference(a_label, b_label, a_costs, b_costs, budget=None, confidenc
                   float(np.median(d)) if d.size else float("nan"), low, high, coverage, confidence)
 
 
-def paired_comparisons(records, reference: str, budgets=(20, 60, 140, None), others=None) -> dict:
+#: Link budgets of the tables and findings, in links per node: 20, 60 and 140 links at the paper's
+#: N = 20, the same share of the possible links at every size (a fixed 140 links would be "no
+#: links" at N = 1000 and "all links" at N = 4).
+BUDGETS_PER_NODE = (1, 3, 7)
+
+
+def panel_nodes(records) -> int | None:
+    """The (median) node count of a panel's instances; None where no record says."""
+    nodes = [i.nodes for i in as_records(records).instances if i.nodes]
+    return int(np.median(nodes)) if nodes else None
+
+
+def panel_budgets(records) -> tuple:
+    """One panel's link budgets: :data:`BUDGETS_PER_NODE` times its node count, then None (any number)."""
+    n = panel_nodes(records)
+    if n is None:
+        return (20, 60, 140, None)
+    return tuple(k * n for k in BUDGETS_PER_NODE) + (None,)
+
+
+def paired_comparisons(records, reference: str, budgets=None, others=None) -> dict:
     """Panel -> list of :class:`Paired` of ``reference`` against every other label, per budget.
 
-    ``budgets`` None means any number of links. ``others`` restricts the labels
+    ``budgets``: link budgets (None in it: any number of links), the same in every panel;
+    by default each panel's own (:func:`panel_budgets`). ``others`` restricts the labels
     compared with the reference.
     """
-    grid = np.array([np.inf if b is None else b for b in budgets], dtype=float)
-    tables = best_tables(records, grid)
+    records = as_records(records)
     out = {}
-    for panel in sorted({p for p, _ in tables}):
+    for panel, in_panel in sorted(records.by_panel.items()):
+        panel_grid = panel_budgets(in_panel) if budgets is None else tuple(budgets)
+        grid = np.array([np.inf if b is None else b for b in panel_grid], dtype=float)
+        tables = best_tables(in_panel, grid)
         if (panel, reference) not in tables:
             continue
         ref = tables[(panel, reference)]
         rows = []
-        for (pnl, label), other in tables.items():
-            if pnl != panel or label == reference or (others is not None and label not in others):
+        for (_, label), other in tables.items():
+            if label == reference or (others is not None and label not in others):
                 continue
-            rows += [paired_difference(reference, label, ref[:, k], other[:, k], budgets[k])
-                     for k in range(len(budgets))]
+            rows += [paired_difference(reference, label, ref[:, k], other[:, k], panel_grid[k])
+                     for k in range(len(panel_grid))]
         out[panel] = rows
     return out

@@ -82,6 +82,7 @@ METHOD_STYLES: dict[str, tuple[str, str, str]] = {
     # instantaneous: blues and teals
     "lqr": ("#000000", "*", "instantaneous"),
     "sparse_admm": ("#0072B2", "o", "instantaneous"),
+    "sparse_newton": ("#0072B2", "v", "instantaneous"),
     "sparse_sdp": ("#56B4E9", "s", "instantaneous"),
     "truncated_lqr": ("#332288", "D", "instantaneous"),
     "gcnn": ("#44AA99", "P", "instantaneous"),
@@ -110,8 +111,8 @@ METHOD_STYLES: dict[str, tuple[str, str, str]] = {
 }
 
 #: Variants drawn with hollow markers, so that a filled marker they coincide with shows through
-#: (the linear GRNN-Sparse path lies on the tanh one within a percent).
-HOLLOW = ("grnn_sparse_linear", "grnn_linear", "sls_plant^2", "sls_plant^3")
+#: (the linear GRNN-Sparse path lies on the tanh one within a percent; the prox-Newton path on ADMM's).
+HOLLOW = ("grnn_sparse_linear", "grnn_linear", "sls_plant^2", "sls_plant^3", "sparse_newton")
 _HOLLOW_PAIRS = {METHOD_STYLES[k][:2] for k in HOLLOW}
 
 # Colours no built-in method uses, for plug-ins (Tol's muted and light schemes).

@@ -9,6 +9,19 @@ from baselines.sparse_delayed import delayed_closed_loop
 from codesign.learned.grnn_bptt import _node_sizes, _norm, _penalized, _Problem, grnn_loss_and_grad
 
 
+def static_gain_response_cost(instance, K):
+    """Normalized cost from the responses x(t) = Acl^t x(0), summed forward in dense float64."""
+    Acl = instance.A + instance.B @ K
+    phi = np.eye(instance.n)
+    total = 0.0
+    for _ in range(instance.horizon):
+        u = K @ phi
+        total += np.sum(phi * (instance.Q @ phi)) + np.sum(u * (instance.R @ u))
+        phi = Acl @ phi
+    total += np.sum(phi * (instance.P @ phi))
+    return total / instance.trace_P
+
+
 def augmented_delayed_reference(instance, K_local, K_delayed):
     """Cost and gradient of the augmented loop z = [x; x_prev] by its Lyapunov recursion (m x n gains).
 

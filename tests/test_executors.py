@@ -141,3 +141,39 @@ def test_separate_process_dask_cluster_matches_the_process_pool(tmp_path):
     assert local.returncode == 0, local.stderr[-2000:]
     rows = _dump(tmp_path / "local" / "results.sqlite")
     assert len(rows) == 12 and rows == _dump(tmp_path / "remote" / "results.sqlite")
+
+
+SLS_LOCAL_SPEC = """
+name = "columns"
+[instances]
+n = [60]
+seeds = 1
+horizon = 10
+[[methods]]
+method = "sls_local"
+params = { locality = 3, fir = 8 }
+"""
+
+
+def test_localized_sls_spreads_its_columns_over_the_dask_cluster(tmp_path):
+    """Run as a task of a dask cluster, sls_local solves its columns in tasks of 50 over the workers:
+    the same design as in a local process, to the last bit."""
+    import json
+
+    distributed = pytest.importorskip("distributed")
+    spec = parse_spec(SLS_LOCAL_SPEC)
+    with Store(tmp_path / "local.sqlite") as store:
+        run_experiment(spec, store, workers=1, progress=False)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with distributed.Client(cluster) as client, Store(tmp_path / "dask.sqlite") as store:
+            run_experiment(spec, store, executor=client.get_executor(pure=False), progress=False)
+    local, remote = _dump(tmp_path / "local.sqlite"), _dump(tmp_path / "dask.sqlite")
+    assert len(local) == 1 and local == remote and local[0][-1] == "optimal"
+
+    def tasks(path):
+        con = sqlite3.connect(path)
+        (extras,), = con.execute("SELECT extras FROM designs").fetchall()
+        con.close()
+        return json.loads(extras)["column_tasks"]
+
+    assert tasks(tmp_path / "local.sqlite") == 1 and tasks(tmp_path / "dask.sqlite") == 2

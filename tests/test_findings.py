@@ -22,7 +22,7 @@ SLS_PARAMS = {"act_delay": 1, "fir": None, "horizon": 50, "speed": 1.0}
 
 
 def _inst(seed, a_norm=1.05):
-    return {"family": "paper", "n": 8, "a_norm": a_norm, "seed": seed}
+    return {"family": "paper", "n": 20, "a_norm": a_norm, "seed": seed}
 
 
 def _rec(inst, method, label, links, cost, *, info="delayed", params=None, kind="exact", stderr=0.0):
@@ -290,7 +290,7 @@ def test_forest_has_one_row_per_comparison_filled_where_significant(records, com
     styles = label_styles(Records.from_rows(two_panels))
     fig, axes = plot_forest(comparisons, styles)
     assert len(axes) == 2
-    for ax, panel in zip(axes, (("paper", 8, 1.05), ("paper", 8, 1.2))):
+    for ax, panel in zip(axes, (("paper", 20, 1.05), ("paper", 20, 1.2))):
         mine = [c for c in comparisons if c.panel == panel]
         markers = [line for line in ax.lines if line.get_gid() == "forest-median"]
         assert len(markers) == len(mine)
@@ -315,3 +315,22 @@ def test_panels_are_compared_in_numeric_order_of_n():
     comparisons = select_comparisons(Records.from_rows(rows))
     seen = list(dict.fromkeys(c.panel[1] for c in comparisons))
     assert seen == [20, 50, 100]
+
+
+def test_budgets_are_links_per_node_in_each_panel():
+    """1, 3 and 7 links per node, then any: the budget tables' columns, at every N (a fixed 140 links
+    would be every link at N = 8 and almost none at N = 1000)."""
+    small = [r for i in range(N) for r in _designs({**_inst(i), "n": 8}, i)]
+    large = [{**r, "links": 100 * r["links"]} for i in range(N) for r in _designs({**_inst(i), "n": 1000}, i)]
+    comparisons = select_comparisons(Records.from_rows(small + large))
+    by_panel = {}
+    for c in comparisons:
+        if c.a == TANH and c.b == SD:
+            by_panel.setdefault(c.panel[1], []).append(c.budget)
+    # At N = 8 both designs (10 links) first fit within 24; at N = 1000 (1000 links) within 1000.
+    assert by_panel == {8: [24, 56, None], 1000: [1000, 3000, 7000, None]}
+    # The forest's rows are then budgets per node, each panel at its own link count.
+    fig, axes = plot_forest(comparisons, label_styles(Records.from_rows(small + large)))
+    labels = [t.get_text() for t in axes[0].get_yticklabels()]
+    assert {"≤ 1/node", "≤ 3/node", "≤ 7/node", "any"} <= set(labels) and not any("≤ 24" in x for x in labels)
+    plt.close(fig)

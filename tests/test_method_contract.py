@@ -28,6 +28,7 @@ FAST = {
     "gcnn": {"steps": 3, "ensemble": 1, "stability_steps": 0, "curve_size": 10},
     "sparse_sdp": {"gammas": [0.01]},
     "sparse_admm": {"gammas": [1e-3, 1e-2]},
+    "sparse_newton": {"gammas": [1e-3, 1e-2]},
     "truncated_lqr": {"links": [10, 0]},
     "sparse_budget": {"links": [10, 0]},
     "best_pattern": {"links": [0, 1, 56], "starts": 2},

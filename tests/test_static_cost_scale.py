@@ -14,6 +14,7 @@ from baselines.polish import polish_gain
 from codesign import evaluation
 from codesign.evaluation import static_gain_cost, static_gain_cost_and_grad
 from codesign.instances import FAST_DARE_ABOVE, Instance, paper_instance
+from references import static_gain_response_cost  # tests/references.py
 
 
 @pytest.fixture(scope="module")
@@ -203,19 +204,6 @@ def test_structured_polish_reaches_the_dense_optimum(paper100, monkeypatch):
     assert structured.grad_norm < 1e-6 * structured.cost
 
 
-def _response_cost(instance, K):
-    """Normalized cost from the responses x(t) = Acl^t x(0), summed forward in dense float64."""
-    Acl = instance.A + instance.B @ K
-    phi = np.eye(instance.n)
-    total = 0.0
-    for _ in range(instance.horizon):
-        u = K @ phi
-        total += np.sum(phi * (instance.Q @ phi)) + np.sum(u * (instance.R @ u))
-        phi = Acl @ phi
-    total += np.sum(phi * (instance.P @ phi))
-    return total / instance.trace_P
-
-
 @pytest.mark.slow
 def test_paper_scale_costs_match_an_independent_computation():
     """N = 1000: the structured costs of the diagonal and LQR gains against forward responses."""
@@ -224,7 +212,7 @@ def test_paper_scale_costs_match_an_independent_computation():
     diagonal = np.diag(np.diag(instance.K_lqr))
     lqr = np.array(instance.K_lqr)
     for K in (diagonal, lqr):
-        assert static_gain_cost(instance, K) == pytest.approx(_response_cost(instance, K), rel=1e-8)
+        assert static_gain_cost(instance, K) == pytest.approx(static_gain_response_cost(instance, K), rel=1e-8)
     # With the DARE's P as terminal cost, LQR's cost-to-go is P at every step: exactly 1, and
     # the noise adds noise_std^2 trace(P) per step, T steps.
     assert static_gain_cost(instance, lqr) == pytest.approx(1.0, abs=1e-9)

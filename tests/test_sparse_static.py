@@ -400,16 +400,19 @@ def test_paper_scale_paths(seed, a_norm):
         assert all(b >= a - 1e-12 for a, b in zip(costs, costs[1:])), (name, costs)
 
 
-def test_admm_keeps_the_previous_gain_when_a_gamma_fails(monkeypatch):
+@pytest.mark.parametrize("path", ["sparse_admm", "sparse_newton"])
+def test_an_l1_path_keeps_the_previous_gain_when_a_gamma_fails(path, monkeypatch):
     import importlib
+
+    import baselines
 
     from codesign.design import Design
 
-    # `baselines.sparse_admm` is the function; the module is reached by its full name.
-    admm_module = importlib.import_module("baselines.sparse_admm")
+    # The path (shared by the l1 solvers) lives in baselines._sparse.
+    path_module = importlib.import_module("baselines._sparse")
 
     inst = paper_instance(1, n=8)
-    real = admm_module.design_on_pattern
+    real = path_module.design_on_pattern
     calls = []
 
     def failing_second(instance, method, params, K, **kwargs):
@@ -419,16 +422,17 @@ def test_admm_keeps_the_previous_gain_when_a_gamma_fails(monkeypatch):
                                   info_model="instantaneous")
         return real(instance, method, params, K, **kwargs)
 
-    monkeypatch.setattr(admm_module, "design_on_pattern", failing_second)
-    first, second, third = sparse_admm(inst, gammas=[1e-4, 1e-3, 1e-2], diagonal_end=False)
+    monkeypatch.setattr(path_module, "design_on_pattern", failing_second)
+    method = getattr(baselines, path)
+    first, second, third = method(inst, gammas=[1e-4, 1e-3, 1e-2], diagonal_end=False)
     assert second.status == "optimal" and second.extras["fallback"]
     assert "previous gamma" in second.message and second.params["gamma"] == 1e-3
     assert (second.links, second.cost) == (first.links, first.cost)
     assert not third.extras["fallback"] and third.status == "optimal"
 
     calls.clear()
-    monkeypatch.setattr(admm_module, "design_on_pattern",
+    monkeypatch.setattr(path_module, "design_on_pattern",
                         lambda instance, method, params, K, **kw: Design.failure(
                             method, params, "diverged", "gain does not stabilize", info_model="instantaneous"))
-    (only,) = sparse_admm(inst, gammas=[1e-4])
+    (only,) = method(inst, gammas=[1e-4])
     assert only.status == "diverged" and np.isnan(only.cost)

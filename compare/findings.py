@@ -208,6 +208,10 @@ class Comparison:
     style_a: Style | None = None
     per_node: float | None = None
 
+    def budget_tier(self, per_node: bool):
+        """This cell's budget as figures and text name it: links, or links per node (see :func:`budgets_per_node`)."""
+        return self.per_node if per_node else self.budget
+
     @property
     def too_few(self) -> bool:
         """Too few instances for a 95 % interval: only counts may be stated."""

@@ -147,17 +147,13 @@ def _where(cells: Sequence[Comparison], names: Mapping, every: bool = True) -> s
     per_node = budgets_per_node(cells)
     held: dict = {}
     for c in cells:
-        held.setdefault(_tier(c, per_node), set()).add(c.panel)
+        held.setdefault(c.budget_tier(per_node), set()).add(c.panel)
     groups: dict[tuple, list] = {}
     for budget, panels in held.items():
         groups.setdefault(tuple(p for p in order if p in panels), []).append(budget)
     ranked = sorted(groups.items(), key=lambda item: -len(item[0]))
     return _join([_budgets_phrase(budgets, per_node) + _in_panels(panels, names, every) for panels, budgets in ranked])
 
-
-def _tier(c: Comparison, per_node: bool):
-    """A cell's budget as the findings name it: links, or links per node where panels differ in size."""
-    return c.per_node if per_node else c.budget
 
 
 def _scope(lead: Sequence[Comparison], cells: Sequence[Comparison], names: Mapping) -> str:
@@ -166,9 +162,9 @@ def _scope(lead: Sequence[Comparison], cells: Sequence[Comparison], names: Mappi
     rest = [c for c in cells if id(c) not in mine]
     odd = {c.panel for c in rest}
     per_node = budgets_per_node(cells)
-    budgets = list(dict.fromkeys(_tier(c, per_node) for c in cells))
+    budgets = list(dict.fromkeys(c.budget_tier(per_node) for c in cells))
     others = {p for p in names if p not in odd}
-    complete = all(any(c.panel == p and _tier(c, per_node) == b for c in lead) for p in others for b in budgets)
+    complete = all(any(c.panel == p and c.budget_tier(per_node) == b for c in lead) for p in others for b in budgets)
     if len(odd) == 1 and len(names) >= 3 and complete:
         return f"{_budgets_phrase(budgets, per_node)} in every panel but one"
     return _where(lead, names)

@@ -32,17 +32,13 @@ def _num(x: float) -> str:
     """A forest-plot annotation: three significant digits."""
     return f"{x:+,.0f}" if abs(x) >= 100 else f"{x:+.3g}"
 
-def _row(c: Comparison, by_node: bool):
-    return c.per_node if by_node else c.budget
-
-
 def _rows(comparisons: Sequence[Comparison], by_node: bool = False):
     """Figure layout: [(group, [((a, b), [budgets])])] in the order of ``comparisons``."""
     layout: dict[str, dict[tuple, list]] = {}
     for c in comparisons:
         budgets = layout.setdefault(c.group, {}).setdefault((c.a, c.b), [])
-        if _row(c, by_node) not in budgets:
-            budgets.append(_row(c, by_node))
+        if c.budget_tier(by_node) not in budgets:
+            budgets.append(c.budget_tier(by_node))
     # Budgets in increasing order whichever panel met them first (None, any number of links, last).
     return [(group, [(pair, sorted(budgets, key=_budget_order)) for pair, budgets in pairs.items()])
             for group, pairs in layout.items()]
@@ -148,7 +144,7 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
         axes = list(np.ravel(axes))
         fig = axes[0].figure
     values = [v for c in comparisons for v in (c.paired.low, c.paired.high, c.paired.median)]
-    ends = {(c.group, (c.a, c.b), _row(c, by_node), c.panel): c for c in comparisons}
+    ends = {(c.group, (c.a, c.b), c.budget_tier(by_node), c.panel): c for c in comparisons}
     for ax, panel in zip(axes, panels):
         edge = _symlog_axis(ax, values)
         for i, (_, start, stop) in enumerate(blocks):

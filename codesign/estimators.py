@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .instances import FAST_DARE_ABOVE
+
 __all__ = ["control_variate_estimate", "importance_estimate", "fitted_cost_form", "projected_relative_stderr",
            "TiltedProposal", "CV_FOLDS", "MIN_CV_DRAWS"]
 
@@ -37,6 +39,10 @@ CV_FOLDS = 10
 # fitted on (CV_FOLDS - 1) folds do not overfit; beyond, fewer features are used.
 _ROWS_PER_FEATURE = 4
 _MAX_FEATURES = 1500
+#: Above this many states (the structured path's threshold, :data:`codesign.evaluation.STRUCTURED_ABOVE`)
+#: a draw count too small for the squares fits x0'Px0 alone, not more features than it can fit;
+#: at and below, the features are as they were, so that the shipped reports' costs reproduce.
+LARGE_ABOVE = FAST_DARE_ABOVE
 #: Below this many draws the regression has too little to fit: the (weighted) sample mean is reported.
 MIN_CV_DRAWS = 200
 # Largest variance inflation of the tilted proposal (along the top eigenvector of
@@ -92,6 +98,9 @@ def _choose_features(instance, draws: int) -> _Features:
     rows, cols = rows[keep], cols[keep]
     if rows.size + 1 <= budget:
         return _Features(rows, cols, True, f"{rows.size} squares and graph-coupled monomials + x0'Px0")
+    if n > LARGE_ABOVE and n + 1 > budget:
+        # Fitting n + 1 coefficients on fewer rows only adds noise (1001 on 1800 at n = 1000).
+        return _Features(np.arange(0), np.arange(0), True, "x0'Px0")
     return _Features(np.arange(n), np.arange(n), True, f"{n} squares + x0'Px0")
 
 
@@ -132,7 +141,7 @@ def _solve_normal_equations(gram, moment):
         return np.linalg.lstsq(gram, moment, rcond=None)[0]
 
 
-def control_variate_estimate(instance, x0, costs) -> tuple[float, float, str]:
+def control_variate_estimate(instance, x0, costs, form=None) -> tuple[float, float, str]:
     """Cross-fitted control-variate estimate of the mean of ``costs``.
 
     Parameters
@@ -143,6 +152,11 @@ def control_variate_estimate(instance, x0, costs) -> tuple[float, float, str]:
         quadratic features rest on it.
     costs : ndarray, shape (batch,)
         Each trajectory's cost.
+    form : ndarray (n, n), optional
+        A quadratic form M fixed before the draws (the controller's
+        :func:`~codesign.evaluation.local_cost_form`): ``x0'Mx0 - tr M`` joins
+        the features. Where the monomials are too many for the draws (hundreds
+        of states), it carries what they would.
 
     Returns
     -------
@@ -156,16 +170,25 @@ def control_variate_estimate(instance, x0, costs) -> tuple[float, float, str]:
     m = costs.shape[0]
     chosen = _choose_features(instance, m)
     means = chosen.means(instance)
+    extra = [] if form is None else [np.asarray(form, dtype=float)]
 
     def centered_rows(index):
-        return np.hstack([np.ones((index.size, 1)), chosen.values(instance, x0[index]) - means])
+        columns = [np.ones((index.size, 1)), chosen.values(instance, x0[index]) - means]
+        columns += [_form_feature(x0[index], M) for M in extra]
+        return np.hstack(columns)
 
     residuals, fit = _cross_fit(centered_rows, costs)
-    estimator = f"control variates: {chosen.name}, {fit}"
+    estimator = f"control variates: {chosen.name}{' + the local cost form' if extra else ''}, {fit}"
     return float(residuals.mean()), float(residuals.std(ddof=1) / np.sqrt(m)), estimator
 
 
-def projected_relative_stderr(instance, x0, costs, draws: int, form=None, weights=None) -> float:
+def _form_feature(x0, M) -> np.ndarray:
+    """``x0'Mx0 - tr M`` per row, as a column (mean 0 under N(0, I))."""
+    return (np.einsum("bi,bi->b", x0 @ M, x0) - np.trace(M))[:, None]
+
+
+def projected_relative_stderr(instance, x0, costs, draws: int, form=None, weights=None, *,
+                              form_in_estimate: bool = False) -> float:
     """Relative standard error that the estimate on ``draws`` validation draws is projected to have.
 
     Projected from a pilot: ``costs`` of draws ``x0`` apart from the validation
@@ -181,7 +204,9 @@ def projected_relative_stderr(instance, x0, costs, draws: int, form=None, weight
     ``x0'Mx0`` (mean tr M), which lies in the validation estimate's span and
     carries most of what the missing monomials would. Where the validation
     estimate has fewer features, ``form`` is not used: the projection would
-    credit the validation estimate with a feature it lacks.
+    credit the validation estimate with a feature it lacks, unless
+    ``form_in_estimate`` says the validation estimate has ``form`` itself among
+    its features (:func:`control_variate_estimate` with ``form``, above 200 states).
 
     Returns
     -------
@@ -200,7 +225,8 @@ def projected_relative_stderr(instance, x0, costs, draws: int, form=None, weight
         chosen = _choose_features(instance, costs.shape[0])
         means = chosen.means(instance)
         spans_every_monomial = not _choose_features(instance, draws).with_P
-        extra = [np.asarray(form, dtype=float)] if form is not None and spans_every_monomial else []
+        uses_form = spans_every_monomial or form_in_estimate
+        extra = [np.asarray(form, dtype=float)] if form is not None and uses_form else []
         root = np.sqrt(w)
 
         def centered_rows(index):

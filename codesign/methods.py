@@ -214,6 +214,11 @@ class Method:
         function itself runs it at any size.
     max_states_reason : str
         Why, with what was measured, e.g. ``"one γ takes 19 minutes at 500 states"``.
+    size_limit : callable, optional
+        ``size_limit(instance, params) -> (states, reason) or None``: a tighter
+        limit for some settings or instances only (GRNN-Sparse's l1 stage on
+        every pair of nodes, but not on a few hops; node blocks, whose products
+        stay dense), enforced like ``max_states``.
     """
 
     name: str
@@ -229,6 +234,7 @@ class Method:
     node_blocks: bool = False
     max_states: int | None = None
     max_states_reason: str = ""
+    size_limit: Callable | None = None
 
     def __post_init__(self):
         unknown = set(self.produces) - set(PRODUCTS)
@@ -257,6 +263,7 @@ class Method:
         node_blocks: bool = False,
         max_states: int | None = None,
         max_states_reason: str = "",
+        size_limit: Callable | None = None,
     ) -> "Method":
         """A method from a function's keyword-only parameters.
 
@@ -284,6 +291,7 @@ class Method:
             node_blocks=node_blocks,
             max_states=max_states,
             max_states_reason=max_states_reason,
+            size_limit=size_limit,
         )
 
     def check_params(self, params: dict, where: str = "params") -> None:
@@ -309,10 +317,15 @@ class Method:
 
     def unsupported(self, instance, params: dict) -> list[Design] | None:
         """The recorded failure for an instance this method cannot handle, or None."""
-        if self.max_states is not None and instance.n > self.max_states:
-            return [Design.failure(self.name, dict(params), FAILED,
-                                   f"method {self.name!r} is not run on {instance.n} states (at most "
-                                   f"{self.max_states}): {self.max_states_reason}", extras={"size_guard": True})]
+        limits = [(self.max_states, self.max_states_reason, "")] if self.max_states is not None else []
+        tighter = self.size_limit(instance, params) if self.size_limit is not None else None
+        if tighter is not None:
+            limits.append((*tighter, " here"))
+        for most, reason, qualifier in limits:
+            if instance.n > most:
+                return [Design.failure(self.name, dict(params), FAILED,
+                                       f"method {self.name!r} is not run on {instance.n} states (at most "
+                                       f"{most}{qualifier}): {reason}", extras={"size_guard": True})]
         if self.node_blocks or getattr(instance, "scalar_nodes", True):
             return None
         return [Design.failure(self.name, dict(params), FAILED,
@@ -560,6 +573,7 @@ def method(
     node_blocks: bool = False,
     max_states: int | None = None,
     max_states_reason: str = "",
+    size_limit: Callable | None = None,
 ):
     """Decorator: register ``f(instance, *, ...)`` as a design method and return it unchanged.
 
@@ -574,7 +588,7 @@ def method(
     bind, exclude
         Keywords fixed to a value (``bind``) or hidden (``exclude``); neither is a
         hyperparameter. Lets one function serve several methods.
-    batch, batch_size, produces, path_param, node_blocks, max_states, max_states_reason
+    batch, batch_size, produces, path_param, node_blocks, max_states, max_states_reason, size_limit
         See :class:`Method`.
     """
 
@@ -582,7 +596,8 @@ def method(
         register(Method.from_function(func, name=name, label=label, summary=summary, bind=bind, exclude=exclude,
                                       batch=batch, batch_size=batch_size, produces=produces,
                                       path_param=path_param, node_blocks=node_blocks,
-                                      max_states=max_states, max_states_reason=max_states_reason))
+                                      max_states=max_states, max_states_reason=max_states_reason,
+                                      size_limit=size_limit))
         return func
 
     return decorate

@@ -117,8 +117,9 @@ def test_a_method_refuses_at_once_past_its_size(instance):
     admm = get_method("sparse_admm")
     assert admm.max_states == 300 and "19 minutes at 500" in admm.max_states_reason
     assert get_method("sparse_delayed").max_states == 200 and get_method("sparse_budget").max_states == 300
-    assert get_method("gcnn").max_states == 300
-    assert {get_method(f"grnn{v}").max_states for v in ("", "_dense", "_fixed", "_sparse")} == {500}
+    assert get_method("gcnn").max_states == 1000
+    assert [get_method(f"grnn{v}").max_states for v in ("", "_dense", "_fixed", "_sparse")] == [1000, 500, 1000, 1000]
+    assert get_method("grnn_sparse").size_limit(instance, {})[0] == 500  # its l1 stage on all N^2 pairs
     assert get_method("lqr").max_states is None and get_method("sls_local").max_states is None
     small = dataclasses.replace(admm, max_states=instance.n - 1)
     start = time.perf_counter()

@@ -41,7 +41,7 @@ import numpy as np
 from .._lazy import lazy_import
 from ..controllers import register_controller
 from ..design import Design, count_links
-from ..evaluation import spectral_radius
+from ..evaluation import STRUCTURED_ABOVE, spectral_radius, structured_operator
 from ..instances import node_ranks, node_width
 from ..methods import Above, AtLeast, AtMost, method
 from ..status import DIVERGED
@@ -139,16 +139,29 @@ class GCNNController:
         # within 1e-15 of tanh). The node-major (batch N, K) x (K, F) product and torch.tanh took
         # 4x as long, and rollouts of the cost's refinement are most of the GCNN's time.
         K, batch, N = self.H.shape[0], x.shape[0], self.S.shape[0]
-        powers = np.empty((K, batch, N))
-        powers[0] = x
-        for k in range(1, K):
-            np.matmul(powers[k - 1], self.S.T, out=powers[k])
+        if self._sparse_S is not None:  # node-major powers, S by its CSR: O(N degree) per draw, not O(N^2)
+            powers = np.empty((K, N, batch))
+            powers[0] = x.T
+            for k in range(1, K):
+                powers[k] = self._sparse_S @ powers[k - 1]
+        else:
+            powers = np.empty((K, batch, N))
+            powers[0] = x
+            for k in range(1, K):
+                np.matmul(powers[k - 1], self.S.T, out=powers[k])
         Ht2, w2, wsum = self._folded
         Z = Ht2 @ powers.reshape(K, batch * N)  # (F, batch N)
         torch.sigmoid(torch.from_numpy(Z), out=torch.from_numpy(Z))
         u = w2 @ Z
         u -= wsum
+        if self._sparse_S is not None:
+            return np.ascontiguousarray(u.reshape(N, batch).T), None
         return u.reshape(batch, N), None
+
+    @cached_property
+    def _sparse_S(self):
+        """S as CSR above STRUCTURED_ABOVE nodes where it is sparse (else None: the dense products, unchanged)."""
+        return structured_operator(self.S) if self.S.shape[0] > STRUCTURED_ABOVE else None
 
     @cached_property
     def _folded(self):
@@ -321,12 +334,19 @@ def _finish(job: _Job, results, seconds) -> Design:
                             message=diverged_members_message(results))
 
 
+def _dense_path_limit(instance, params: dict):
+    """Off the paper's setting (node blocks, Q or R not I) the GCNN trains by dense products: its old limit."""
+    if _layout(instance) is None:
+        return None
+    return 300, ("off the paper's setting (nodes with several states or inputs, or Q, R other than I) its graph "
+                 "filters are dense N x N products: one design takes 127 s at 200 states with the default settings")
+
+
 # The runner hands gcnn_batch up to 25 runs at once: they train in shared stacks.
 @method("gcnn", label="GCNN", batch=gcnn_batch, batch_size=25, produces=("training_curve",),
-        node_blocks=True, max_states=300,
-        max_states_reason="its graph filters are dense N x N products: one design takes 127 s at 200 states "
-                          "with the default settings (one thread), about 15 minutes at 500 by the growth N^2.2 "
-                          "measured from 20 to 100 states")
+        node_blocks=True, max_states=1000, size_limit=_dense_path_limit,
+        max_states_reason="the largest size it has been measured at (docs/performance.md, 'A thousand nodes'); "
+                          "above 200 states its products with S, A and B run on their supports")
 @takes_settings(GCNNSettings)
 def gcnn(instance, *, seed: Annotated[int, AtLeast(0)] = 0, **settings) -> Design:
     """Gama-Sojoudi GCNN (192 parameters, instantaneous multi-hop information), trained as the paper did.

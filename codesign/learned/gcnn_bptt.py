@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from .._lazy import lazy_import
+from ..evaluation import STRUCTURED_ABOVE
 from ..instances import node_ranks, node_width
 from dataclasses import dataclass
 
@@ -60,8 +61,85 @@ def gcnn_init(rng: np.random.Generator, taps: int, features: int, channels: int 
 
 
 @no_grad
-def _rollout_cost(S, H, w, A_t, B_t, P, x0, horizon, trace_P, ws=None):
-    J, _ = _forward(S, H, w, A_t, B_t, P, x0, horizon, keep=False, ws=ws)
+class _DenseProducts:
+    """The products of the paper-setting BPTT with the stacked dense S, A', B' (M, N, N): batched matmuls."""
+
+    def __init__(self, S, A_t, B_t):
+        self.S, self.St, self.A_t, self.B_t = S, S.transpose(1, 2), A_t, B_t
+        self.A, self.Bm = A_t.transpose(1, 2), B_t.transpose(1, 2)
+
+    def shift(self, x, out):
+        """out = x S' (each model's S acting on the node axis)."""
+        torch.bmm(x, self.St, out=out)
+
+    def advance(self, x, u, out):
+        """out = x A' + u B' (the next state)."""
+        torch.bmm(x, self.A_t, out=out)
+        out.baddbmm_(u, self.B_t)
+
+    def input_adjoint(self, scaled, lam, c2, out):
+        """out = c2 scaled + lam B."""
+        torch.baddbmm(scaled, lam, self.Bm, beta=c2, out=out)
+
+    def shift_adjoint(self, base, g):
+        """base + g S."""
+        return torch.baddbmm(base, g, self.S)
+
+    def state_adjoint(self, base, lam):
+        """base + lam A."""
+        return torch.baddbmm(base, lam, self.A)
+
+
+class _SparseProducts:
+    """The same products with S, A, B as one block-diagonal scipy CSR matrix each over the stack.
+
+    Above 200 states (:data:`codesign.evaluation.STRUCTURED_ABOVE`), where the dense
+    (M, N, N) products would be O(N^2) per draw and time step and a graph's S or a
+    plant's A and B has a few nonzeros per row: each product is then one sparse
+    matrix times the node-major signal (M N, B), a copy of O(M N B) each way.
+    """
+
+    def __init__(self, S, A, B, dtype):
+        import scipy.sparse as sp
+
+        def blocks(mats):
+            return sp.block_diag([sp.csr_array(np.asarray(m, dtype=dtype)) for m in mats], format="csr")
+
+        self.S, self.St = blocks(S), blocks([m.T for m in S])
+        self.A, self.At = blocks(A), blocks([m.T for m in A])
+        self.B, self.Bt = blocks(B), blocks([m.T for m in B])
+
+    @staticmethod
+    def _nodes(x):
+        """(M, B, N) rows as the node-major (M N, B) numpy matrix (a copy)."""
+        M, Bsz, N = x.shape
+        return x.transpose(1, 2).reshape(M * N, Bsz).numpy()
+
+    @staticmethod
+    def _rows(y, like):
+        """A node-major (M N, B) result as an (M, B, N) view, shaped like ``like``."""
+        M, Bsz, N = like.shape
+        return torch.from_numpy(np.asarray(y)).view(M, N, Bsz).transpose(1, 2)
+
+    def shift(self, x, out):
+        out.copy_(self._rows(self.S @ self._nodes(x), x))
+
+    def advance(self, x, u, out):
+        out.copy_(self._rows(self.A @ self._nodes(x) + self.B @ self._nodes(u), x))
+
+    def input_adjoint(self, scaled, lam, c2, out):
+        torch.mul(scaled, c2, out=out)
+        out.add_(self._rows(self.Bt @ self._nodes(lam), lam))
+
+    def shift_adjoint(self, base, g):
+        return base + self._rows(self.St @ self._nodes(g), g)
+
+    def state_adjoint(self, base, lam):
+        return base + self._rows(self.At @ self._nodes(lam), lam)
+
+
+def _rollout_cost(S, H, w, A_t, B_t, P, x0, horizon, trace_P, ws=None, products=None):
+    J, _ = _forward(S, H, w, A_t, B_t, P, x0, horizon, keep=False, ws=ws, products=products)
     return J / x0.shape[1] / trace_P
 
 
@@ -79,16 +157,18 @@ def _buffers(M, Bsz, N, K, Fn, horizon, dtype, keep: bool) -> dict:
     )
 
 
-def _forward(S, H, w, A_t, B_t, P, x0, horizon, keep: bool, ws: dict | None = None):
+def _forward(S, H, w, A_t, B_t, P, x0, horizon, keep: bool, ws: dict | None = None, products=None):
     """Roll the stack out from x0 (M, B, N) with in-place buffers; J (M,) summed over the batch.
 
     With ``keep`` the trajectories and activations are kept for the backward pass.
+    ``products``: how S, A and B multiply (:class:`_SparseProducts`; by default the
+    dense S, A_t, B_t).
     """
     M, Bsz, N = x0.shape
     K, Fn = H.shape[1], H.shape[2]
     BN = Bsz * N
     T = horizon
-    St = S.transpose(1, 2)
+    ops = _DenseProducts(S, A_t, B_t) if products is None else products
     Ht = H.transpose(1, 2)  # (M, F, K)
     wr = w.unsqueeze(1)  # (M, 1, F)
     if ws is None:
@@ -103,14 +183,13 @@ def _forward(S, H, w, A_t, B_t, P, x0, horizon, keep: bool, ws: dict | None = No
         xk = XK[slot]
         xk[:, 0].copy_(x)
         for k in range(1, K):
-            torch.bmm(xk[:, k - 1], St, out=xk[:, k])
+            ops.shift(xk[:, k - 1], xk[:, k])
         a = Acts[slot]
         torch.bmm(Ht, xk.view(M, K, BN), out=a)
         tanh_(a)
         u = U[slot]
         torch.bmm(wr, a, out=u.view(M, 1, BN))
-        torch.bmm(x, A_t, out=x_next)
-        x_next.baddbmm_(u, B_t)
+        ops.advance(x, u, x_next)
         J.baddbmm_(x.view(M, 1, BN), x.view(M, BN, 1))
         J.baddbmm_(u.view(M, 1, BN), u.view(M, BN, 1))
     xT = X[T] if keep else X[T % 2]
@@ -119,11 +198,12 @@ def _forward(S, H, w, A_t, B_t, P, x0, horizon, keep: bool, ws: dict | None = No
     return J.view(M), (X, U, XK, Acts, PxT)
 
 
-def _loss_and_grad(S, H, w, A_t, B_t, P, x0, horizon, ws: dict | None = None):
+def _loss_and_grad(S, H, w, A_t, B_t, P, x0, horizon, ws: dict | None = None, products=None):
     """Per-model mean cost J / B and its gradient w.r.t. (H, w), by hand-written BPTT.
 
     The backward pass reuses the stored activations and buffers instead of
-    allocating fresh (M, 32, B N) tensors at every operation.
+    allocating fresh (M, 32, B N) tensors at every operation. ``products`` as in
+    :func:`_forward`.
     """
     M, Bsz, N = x0.shape
     K, Fn = H.shape[1], H.shape[2]
@@ -131,11 +211,10 @@ def _loss_and_grad(S, H, w, A_t, B_t, P, x0, horizon, ws: dict | None = None):
     T = horizon
     if ws is None:
         ws = _buffers(M, Bsz, N, K, Fn, horizon, x0.dtype, keep=True)
-    J, (X, U, XK, Acts, PxT) = _forward(S, H, w, A_t, B_t, P, x0, horizon, keep=True, ws=ws)
+    ops = _DenseProducts(S, A_t, B_t) if products is None else products
+    J, (X, U, XK, Acts, PxT) = _forward(S, H, w, A_t, B_t, P, x0, horizon, keep=True, ws=ws, products=ops)
     wc = w.unsqueeze(2)  # (M, F, 1)
     c2 = 2.0 / Bsz
-    A = A_t.transpose(1, 2)
-    Bm = B_t.transpose(1, 2)
     lam = PxT * c2
     dHt = torch.zeros(M, Fn, K, dtype=x0.dtype)
     dw = torch.zeros(M, 1, Fn, dtype=x0.dtype)
@@ -144,7 +223,7 @@ def _loss_and_grad(S, H, w, A_t, B_t, P, x0, horizon, ws: dict | None = None):
     dXK = torch.empty(M, K, Bsz, N, dtype=x0.dtype)
     for t in range(T - 1, -1, -1):
         a = Acts[t]
-        torch.baddbmm(U[t], lam, Bm, beta=c2, out=du)
+        ops.input_adjoint(U[t], lam, c2, du)
         dw.baddbmm_(du.view(M, 1, BN), a.transpose(1, 2))
         torch.mul(a, a, out=tmp)
         tmp.sub_(1.0)  # a^2 - 1 = -tanh'
@@ -156,8 +235,8 @@ def _loss_and_grad(S, H, w, A_t, B_t, P, x0, horizon, ws: dict | None = None):
         torch.bmm(H, dz, out=dXK.view(M, K, BN))
         g = dXK[:, K - 1]
         for k in range(K - 2, -1, -1):
-            g = torch.baddbmm(dXK[:, k], g, S)
-        lam_next = torch.baddbmm(g, lam, A)
+            g = ops.shift_adjoint(dXK[:, k], g)
+        lam_next = ops.state_adjoint(g, lam)
         lam_next.add_(X[t], alpha=c2)
         lam = lam_next
     return J / Bsz, [dHt.transpose(1, 2).contiguous(), dw.view(M, Fn)]
@@ -290,7 +369,19 @@ class GCNNStack(StackModel):
             self._curve_cost = lambda x0: torch.from_numpy(compiled.costs(Hn, wn, nodes_first(x0))) / x0.shape[1] / trace_P
             self.params = [H, w]
             return
-        A_t, B_t, P = stack([i.A.T for i in insts]), stack([i.B.T for i in insts]), stack([i.P for i in insts])
+        P = stack([i.P for i in insts])
+        if layout is None and n > STRUCTURED_ABOVE:
+            products = _SparseProducts([i.gso for i in insts], [i.A for i in insts], [i.B for i in insts],
+                                       H.numpy().dtype)
+            ws_train = _buffers(M, batch, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=True)
+            ws_curve = _buffers(M, curve_size, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=False)
+            self._loss_and_grad = lambda x0: _loss_and_grad(None, H, w, None, None, P, x0, horizon, ws_train,
+                                                            products)
+            self._curve_cost = lambda x0: _rollout_cost(None, H, w, None, None, P, x0, horizon, trace_P, ws_curve,
+                                                        products)
+            self.params = [H, w]
+            return
+        A_t, B_t = stack([i.A.T for i in insts]), stack([i.B.T for i in insts])
         if layout is None:
             S = stack([i.gso for i in insts])
             ws_train = _buffers(M, batch, n, GCNN_TAPS, GCNN_FEATURES, horizon, tdt, keep=True)

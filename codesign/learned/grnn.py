@@ -25,8 +25,8 @@ import numpy as np
 from .._lazy import lazy_import
 from ..controllers import register_controller
 from ..design import Design, count_links
-from ..evaluation import exact_cost, impulse_responses, spectral_radius
-from ..instances import node_ranks, node_width
+from ..evaluation import STRUCTURED_ABOVE, exact_cost, impulse_responses, spectral_radius, structured_operator
+from ..instances import hop_distances, node_ranks, node_width
 from ..methods import Above, AtLeast, method
 from ..status import DIVERGED, OPTIMAL
 from .engines import ENGINES, resolve_engine
@@ -98,7 +98,14 @@ class GRNNController:
                                  f"{self.W.shape}, {self.G.shape}")
             object.__setattr__(self, "F", self.F.ravel())
             object.__setattr__(self, "G", self.G.ravel())
+            # Above STRUCTURED_ABOVE nodes a sparse S is multiplied on its support, the hidden
+            # state kept node-major (N, h, batch) so that S acts on rows: a step then costs
+            # O(N degree h batch) instead of O(N^2 h batch) (11x at N = 1000, 7 links per node).
+            # At and below, the dense products run unchanged (the shipped reports' costs).
+            sparse = structured_operator(self.S) if nodes > STRUCTURED_ABOVE else None
+            object.__setattr__(self, "_S_op", sparse)
             return
+        object.__setattr__(self, "_S_op", None)
         layout = {}
         for name, default in (("state_nodes", nodes), ("input_nodes", nodes)):
             value = getattr(self, name)
@@ -129,9 +136,18 @@ class GRNNController:
         # Hidden state kept feature-major, (h, batch, N): W acts on the first axis and S on the
         # last, each as one wide matrix product. The node-major (N, batch, h) layout needs a
         # tall-thin (N batch, h) x (h, h) product that runs several times slower.
+        if self._S_op is not None:
+            return np.zeros((self.S.shape[0], self.hidden, batch))
         return np.zeros((self.hidden, batch, self.S.shape[0]))
 
     def _pre_activation(self, state, x):
+        if self._S_op is not None:  # node-major (N, h, batch): S by its CSR on rows, W per node
+            n, h, batch = state.shape
+            pre = (self._S_op @ np.matmul(self.W.T, state).reshape(n, h * batch)).reshape(n, h, batch)
+            xt = np.ascontiguousarray(x.T)  # no copy in a rollout, whose states are node-major
+            for k in range(h):
+                pre[:, k, :] += self.F[k] * xt
+            return pre
         h, batch, n = state.shape
         pre = ((self.W.T @ state.reshape(h, batch * n)).reshape(h * batch, n) @ self.S.T).reshape(h, batch, n)
         if not self.blocks:
@@ -143,6 +159,8 @@ class GRNNController:
         return pre
 
     def _output(self, Z):
+        if self._S_op is not None:
+            return np.ascontiguousarray(np.matmul(self.G, Z).T)
         h, batch, n = Z.shape
         if not self.blocks:
             return (self.G @ Z.reshape(h, batch * n)).reshape(batch, n)
@@ -174,15 +192,27 @@ class GRNNController:
     def states(self) -> int:
         return self.S.shape[0] if not self.blocks else self.state_nodes.size
 
-    def linearized_closed_loop(self, instance) -> np.ndarray:
+    def linearized_closed_loop(self, instance, *, sparse: bool = False):
         """Closed loop in (x, vec Z) linearized at the origin (tanh'(0) = 1).
 
         With z = vec(Z) row-major (node i's features at i h, ..., i h + h - 1):
         z' = (S kron W') z + Kzx x, u = Gm z', x' = A x + B u, where Kzx puts
         F' x_i into node i's features and Gm reads Z_i G (I kron F', I kron G'
-        with one state and one input per node).
+        with one state and one input per node). ``sparse``: as a scipy CSR
+        matrix, built from sparse factors (one state and one input per node), for
+        :func:`~codesign.evaluation.spectral_radius` at a thousand nodes, where
+        the dense matrix is (n + n h)^2 (288 MB at n = 1000, h = 5).
         """
         n, h = self.S.shape[0], self.hidden
+        if sparse and not self.blocks:
+            import scipy.sparse as sp
+
+            Kzz = sp.kron(sp.csr_array(self.S), self.W.T, format="csr")
+            Kzx = sp.kron(sp.eye_array(n), self.F.reshape(h, 1), format="csr")
+            Gm = sp.kron(sp.eye_array(n), self.G.reshape(1, h), format="csr")
+            B = sp.csr_array(instance.B)
+            top = sp.hstack([sp.csr_array(instance.A) + B @ (Gm @ Kzx), B @ (Gm @ Kzz)])
+            return sp.vstack([top, sp.hstack([Kzx, Kzz])], format="csr")
         Kzz = np.kron(self.S, self.W.T)
         if not self.blocks:
             Kzx = np.kron(np.eye(n), self.F.reshape(h, 1))
@@ -242,6 +272,11 @@ class GRNNSettings(TrainingSettings):
         Refinement runs of the ``sparse`` variant (the paper code used one).
     threshold : float
         Entries of the l1 stage's S below this magnitude are cut (the paper's 0.004).
+    l1_hops : int, optional
+        The ``sparse`` variant's candidate links: the l1 stage trains S on the pairs
+        of nodes within this many hops of the given communication graph (self-loops
+        included) instead of on all N^2 pairs (None, the paper's). Needed above
+        :data:`DENSE_L1_MAX_STATES` states, where a dense S makes the l1 stage too slow.
     activation : {"tanh", "identity"}
         σ in Z(t+1) = σ(S Z(t) W + x(t) F): the paper's tanh, or the identity (the
         linear GRNN: a linear dynamic controller with the same parameterization,
@@ -263,6 +298,7 @@ class GRNNSettings(TrainingSettings):
     frob: Annotated[float, AtLeast(0)] = 2.0
     refine_ensemble: Annotated[int, AtLeast(1)] = 1
     threshold: Annotated[float, AtLeast(0)] = 4e-3
+    l1_hops: Annotated[int, AtLeast(1)] | None = None
     activation: Literal[ACTIVATIONS] = "tanh"
     engine: Literal[ENGINES] = "auto"
 
@@ -357,10 +393,20 @@ def _spec(job: _Job, member: int, *, S0, mask, lr, beta, penalty, init_salt) -> 
     )
 
 
-def _dense_init(job: _Job, member: int) -> np.ndarray:
+def _dense_init(job: _Job, member: int, mask: np.ndarray | None = None) -> np.ndarray:
     rng = np.random.default_rng([job.seed, member, _DENSE_S])
     S = rng.random((job.instance.nodes, job.instance.nodes))
-    return S / S.sum(axis=1, keepdims=True)  # row-stochastic, as in the paper code
+    if mask is not None:
+        S = np.where(mask, S, 0.0)
+    return S / S.sum(axis=1, keepdims=True)  # row-stochastic (on the candidates), as in the paper code
+
+
+def _l1_candidates(job: _Job) -> np.ndarray:
+    """Where the l1 stage's S may be nonzero: every pair, or the pairs within ``l1_hops`` hops."""
+    n, hops = job.instance.nodes, job.settings.l1_hops
+    if hops is None:
+        return np.ones((n, n), bool)
+    return hop_distances(job.instance.comm_adj) <= hops
 
 
 def _first_stage_specs(job: _Job) -> list[ModelSpec]:
@@ -379,7 +425,9 @@ def _first_stage_specs(job: _Job) -> list[ModelSpec]:
             specs.append(_spec(job, member, S0=_dense_init(job, member), mask=np.ones((n, n), bool),
                                lr=s.lr, beta=0.0, penalty=standard, init_salt=_INIT))
         else:  # l1 stage: the paper code's sparse_criterion penalizes ||S|| and ||F|| only
-            specs.append(_spec(job, member, S0=_dense_init(job, member), mask=np.ones((n, n), bool),
+            candidates = _l1_candidates(job)
+            init = _dense_init(job, member, None if job.settings.l1_hops is None else candidates)
+            specs.append(_spec(job, member, S0=init, mask=candidates,
                                lr=s.l1_lr, beta=float(job.beta), penalty=(s.frob, s.frob, 0.0, 0.0),
                                init_salt=_INIT))
     return specs
@@ -454,7 +502,8 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
     controller = (LinearGRNNController if linear else GRNNController)(**result.params, **nodes)
     links, self_loops = count_links(controller.S)
     extras["curve"] = curve(result)
-    extras["spectral_radius"] = spectral_radius(controller.linearized_closed_loop(job.instance))
+    extras["spectral_radius"] = spectral_radius(
+        controller.linearized_closed_loop(job.instance, sparse=job.instance.n > STRUCTURED_ABOVE))
     if linear:
         return _finish_linear(job, controller, first, links, self_loops, seconds, extras)
     return simulated_design(job.instance, controller, method=method, params=job.params, info_model="delayed",
@@ -493,7 +542,8 @@ def grnn(instance, *, variant: str = "given", beta: Annotated[float, AtLeast(0)]
         adjacency. ``sparse``: co-design: an l1 stage on a dense S with weight
         ``beta`` (learning rate ``l1_lr``), entries with ``|S_ij| < threshold``
         zeroed, then a refinement on that support from the l1 values with F, W, G
-        re-initialized.
+        re-initialized. With ``l1_hops`` the l1 stage's candidates are the pairs
+        within that many hops of the given graph instead of all N^2.
     beta : float, optional
         l1 weight, only allowed with ``variant="sparse"``. None there means the
         paper's Table 1 value for the instance's ||A||: 1 for 0.995, 2 for 1.05
@@ -521,7 +571,7 @@ def grnn(instance, *, variant: str = "given", beta: Annotated[float, AtLeast(0)]
 
 
 #: Settings of the co-design (l1 stage, threshold, refinement) that only ``sparse`` uses.
-_SPARSE_ONLY = ("beta", "l1_lr", "threshold", "refine_ensemble")
+_SPARSE_ONLY = ("beta", "l1_lr", "threshold", "refine_ensemble", "l1_hops")
 
 
 class _VariantBatch:
@@ -534,21 +584,34 @@ class _VariantBatch:
         return grnn_batch([(inst, {**params, "variant": self.variant}) for inst, params in pairs])
 
 
-#: Every variant is refused at once above this many states (one thread, default settings):
-#: one GRNN-Sparse design (β = 0.3) takes 86 s at 200 states and 416 s at 500, its l1 stage
-#: training a dense N x N S; a GRNN on the given graph 48 s at 200 and 149 s at 500, but more
-#: than 14 minutes at 1000, most of it scoring (the importance-sampled refinement's rollouts).
-MAX_STATES = 500
-_MAX_STATES_REASONS = {
-    "sparse": "its l1 stage trains a dense N x N S: one design takes 86 s at 200 states and 416 s at 500 with "
-              "the default settings, about half an hour at 1000 (products grow like N^2)",
-    "dense": "S is a dense N x N matrix: GRNN-Sparse's l1 stage, which trains the same, takes 416 s per design "
-             "at 500 states, about half an hour at 1000",
-    "given": "one design took 149 s at 500 states and more than 14 minutes at 1000 with the default settings, "
-             "most of it scoring (the rollouts of the importance-sampled refinement)",
-    "fixed": "as GRNN on the given graph: 149 s per design at 500 states, more than 14 minutes at 1000, most of "
-             "it scoring",
-}
+#: Variants are refused at once above these many states. Above STRUCTURED_ABOVE states training
+#: multiplies S, A and B on their supports (the fused engine) and so do the rollouts that score
+#: a design, so a time step costs O(N degree h batch): at 1000 states one GRNN design on the
+#: given graph took 270 s with the default settings (one thread, docs/performance.md). A dense S
+#: stays O(N^2): the ``dense`` variant, and the l1 stage of ``sparse`` without ``l1_hops``.
+MAX_STATES = {"given": 1000, "fixed": 1000, "sparse": 1000, "dense": 500}
+#: The most states of GRNN-Sparse's l1 stage on all N^2 pairs (``l1_hops`` None).
+DENSE_L1_MAX_STATES = 500
+_DENSE_S_REASON = ("S is a dense N x N matrix: one design takes 416 s at 500 states with the default settings, "
+                   "about half an hour at 1000 (its products grow like N^2)")
+_MEASURED = "the largest size it has been measured at (docs/performance.md, 'A thousand nodes')"
+_MAX_STATES_REASONS = {"sparse": _MEASURED, "dense": _DENSE_S_REASON, "given": _MEASURED, "fixed": _MEASURED}
+
+
+def _blocks_limit(instance, params: dict):
+    """Nodes with several states or inputs: the torch engine's and the rollouts' dense products."""
+    if not getattr(instance, "scalar_nodes", True):
+        return DENSE_L1_MAX_STATES, "on nodes with several states or inputs its products with S, A and B are dense"
+    return None
+
+
+def _sparse_limit(instance, params: dict):
+    """GRNN-Sparse's tighter size limits: its l1 stage on all N^2 pairs (``l1_hops`` not set), node blocks."""
+    if params.get("l1_hops") is None:
+        return DENSE_L1_MAX_STATES, f"its l1 stage trains all N^2 pairs; {_DENSE_S_REASON}: set l1_hops " \
+                                    f"(e.g. 3) to train on a few hops of the communication graph"
+    return _blocks_limit(instance, params)
+
 
 # One function, four methods: the variant is bound, and the co-design's own settings
 # are hidden from the other variants so that a spec setting them is an error naming the key.
@@ -562,6 +625,7 @@ for _name, _variant, _label, _summary in (
     method(_name, label=_label, summary=_summary, bind={"variant": _variant},
            exclude=() if _variant == "sparse" else _SPARSE_ONLY, batch=_VariantBatch(_variant), batch_size=25,
            node_blocks=True,
-           max_states=MAX_STATES, max_states_reason=_MAX_STATES_REASONS[_variant],
+           max_states=MAX_STATES[_variant], max_states_reason=_MAX_STATES_REASONS[_variant],
+           size_limit=_sparse_limit if _variant == "sparse" else _blocks_limit,
            produces=("training_curve", "topology_path") if _variant == "sparse" else ("training_curve",),
            path_param="beta" if _variant == "sparse" else None)(grnn)

@@ -175,12 +175,17 @@ def test_sparse_gcnn_rollouts_equal_the_dense_ones(inst, monkeypatch):
     np.testing.assert_allclose(simulate(inst, controller, x0).costs, before.costs, rtol=1e-12)
 
 
-def test_a_linear_grnn_at_300_states_costs_what_its_closed_loop_says():
-    """At a real size on the structured path (CSR S, A, B): the rollout against the dense closed-loop recursion."""
-    big = paper_instance(1, n=300, connect="bridge", horizon=30)
+@pytest.mark.parametrize("n, horizon", [(300, 30), pytest.param(1000, 50, marks=pytest.mark.slow)])
+def test_a_linear_grnn_at_scale_costs_what_its_closed_loop_says(n, horizon):
+    """At a real size on the structured path (CSR S, A, B): the rollout against the dense closed-loop recursion.
+
+    At N = 1000 (slow: about two minutes, 1.5 GB) the dense recursion multiplies the
+    6000 x 6000 closed loop 50 times, independently of the sparse products it checks.
+    """
+    big = paper_instance(1, n=n, connect="bridge", horizon=horizon)
     S, F, W, G = _parameters(big, seed=2)
     controller = LinearGRNNController(S, 0.2 * F, 0.5 * W, 0.2 * G)
-    assert controller._S_op is not None  # 300 > STRUCTURED_ABOVE
+    assert controller._S_op is not None  # n > STRUCTURED_ABOVE
     n, h = big.n, controller.hidden
     M = controller.linearized_closed_loop(big)  # dense (n + n h)^2: the exact closed loop of a linear GRNN
     Gm = np.kron(np.eye(n), controller.G.reshape(1, h))

@@ -60,7 +60,6 @@ def gcnn_init(rng: np.random.Generator, taps: int, features: int, channels: int 
     return H, w
 
 
-@no_grad
 class _DenseProducts:
     """The products of the paper-setting BPTT with the stacked dense S, A', B' (M, N, N): batched matmuls."""
 
@@ -138,6 +137,7 @@ class _SparseProducts:
         return base + self._rows(self.At @ self._nodes(lam), lam)
 
 
+@no_grad
 def _rollout_cost(S, H, w, A_t, B_t, P, x0, horizon, trace_P, ws=None, products=None):
     J, _ = _forward(S, H, w, A_t, B_t, P, x0, horizon, keep=False, ws=ws, products=products)
     return J / x0.shape[1] / trace_P

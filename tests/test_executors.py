@@ -27,16 +27,21 @@ def _dump(path):
     return rows
 
 
-def test_dask_local_cluster_matches_local_executor(tmp_path):
+def _local_and_dask_cluster(spec_text, tmp_path):
+    """Run a spec in one local process and on a 2-worker dask LocalCluster: (local rows, dask rows, dask summary)."""
     distributed = pytest.importorskip("distributed")
-    spec = parse_spec(SPEC)
+    spec = parse_spec(spec_text)
     with Store(tmp_path / "local.sqlite") as store:
         run_experiment(spec, store, workers=1, progress=False)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         with distributed.Client(cluster) as client, Store(tmp_path / "dask.sqlite") as store:
             summary = run_experiment(spec, store, executor=client.get_executor(pure=False), progress=False)
-            assert summary.computed == 12
-    local, remote = _dump(tmp_path / "local.sqlite"), _dump(tmp_path / "dask.sqlite")
+    return _dump(tmp_path / "local.sqlite"), _dump(tmp_path / "dask.sqlite"), summary
+
+
+def test_dask_local_cluster_matches_local_executor(tmp_path):
+    local, remote, summary = _local_and_dask_cluster(SPEC, tmp_path)
+    assert summary.computed == 12
     assert len(local) == 12 and local == remote
 
 
@@ -160,14 +165,7 @@ def test_localized_sls_spreads_its_columns_over_the_dask_cluster(tmp_path):
     the same design as in a local process, to the last bit."""
     import json
 
-    distributed = pytest.importorskip("distributed")
-    spec = parse_spec(SLS_LOCAL_SPEC)
-    with Store(tmp_path / "local.sqlite") as store:
-        run_experiment(spec, store, workers=1, progress=False)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        with distributed.Client(cluster) as client, Store(tmp_path / "dask.sqlite") as store:
-            run_experiment(spec, store, executor=client.get_executor(pure=False), progress=False)
-    local, remote = _dump(tmp_path / "local.sqlite"), _dump(tmp_path / "dask.sqlite")
+    local, remote, _ = _local_and_dask_cluster(SLS_LOCAL_SPEC, tmp_path)
     assert len(local) == 1 and local == remote and local[0][-1] == "optimal"
 
     def tasks(path):

@@ -105,3 +105,46 @@ def test_autonomous_simulation_and_unbounded_detection():
 def test_simulate_rejects_wrong_shapes(inst):
     with pytest.raises(ValueError, match="x0 must have shape"):
         simulate(inst, StaticGain(inst.K_lqr), np.zeros((5, inst.n + 1)))
+
+
+class _ThreadCountingController:
+    """A static gain that records torch's intra-op pool size at every step."""
+
+    def __init__(self, K):
+        self.K, self.seen = K, []
+
+    def reset(self, batch):
+        return None
+
+    def step(self, state, x):
+        import torch
+
+        self.seen.append(torch.get_num_threads())
+        return x @ self.K.T, state
+
+
+def test_rollouts_run_torch_single_threaded_and_restore_its_pool(inst):
+    """simulate and local_cost_form hold torch at one thread (numpy and torch pools spin against
+    each other otherwise) and give the caller's pool size back, also after an error."""
+    import torch
+
+    from codesign.evaluation import local_cost_form, simulate
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        controller = _ThreadCountingController(np.zeros((inst.m, inst.n)))
+        simulate(inst, controller, np.ones((3, inst.n)))
+        local_cost_form(inst, controller)
+        assert set(controller.seen) == {1} and len(controller.seen) == 2 * inst.horizon
+        assert torch.get_num_threads() == 2
+
+        class Failing(_ThreadCountingController):
+            def step(self, state, x):
+                raise RuntimeError("boom")
+
+        with pytest.raises(RuntimeError, match="boom"):
+            simulate(inst, Failing(controller.K), np.ones((3, inst.n)))
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)

@@ -31,6 +31,7 @@ from typing import Annotated
 
 import numpy as np
 
+from codesign.cluster import spread
 from codesign.design import Design, count_links
 from codesign.evaluation import response_cost
 from codesign.instances import hop_distances
@@ -66,20 +67,7 @@ def _allowed_hops(T: int, locality: int, *, speed: float, act_delay: int) -> lis
     return [min(locality, support_hops(t + 1, speed=speed, act_delay=act_delay)) for t in range(T + 1)]
 
 
-def _cluster():
-    """``distributed.worker_client`` where this design runs as a task of a dask cluster, else None."""
-    try:
-        from distributed import get_worker, worker_client
-    except ImportError:
-        return None
-    try:
-        get_worker()
-    except ValueError:  # not in a dask worker
-        return None
-    return worker_client
-
-
-def _solve_columns(instance, columns, node_dist, hops, fir):
+def _solve_columns(instance, node_dist, hops, fir, columns):
     return [solve_column(instance, j, node_dist, hops, fir=fir) for j in columns]
 
 
@@ -87,21 +75,14 @@ def _all_columns(instance, node_dist, hops, *, fir: bool) -> tuple[list, int]:
     """Every column's :func:`solve_column`, in order, and the number of tasks that solved them.
 
     Run as a task of a dask cluster (``compare run --executor dask...``), the design spreads
-    its columns over the cluster's workers in tasks of :data:`COLUMNS_PER_TASK` columns,
-    seceding from its own slot while they run; elsewhere it solves them in turn. The columns
-    are independent, so both give the same numbers.
+    its columns over the cluster's workers in tasks of :data:`COLUMNS_PER_TASK` columns
+    (:func:`codesign.cluster.spread`); elsewhere it solves them in turn. The columns are
+    independent, so both give the same numbers.
     """
     n = instance.n
-    worker_client = _cluster() if n > COLUMNS_PER_TASK else None
-    if worker_client is None:
-        return _solve_columns(instance, range(n), node_dist, hops, fir), 1
-    chunks = [list(range(start, min(start + COLUMNS_PER_TASK, n))) for start in range(0, n, COLUMNS_PER_TASK)]
-    with worker_client() as client:
-        shared_instance, shared_dist = client.scatter([instance, node_dist], broadcast=True)
-        futures = [client.submit(_solve_columns, shared_instance, chunk, shared_dist, hops, fir, pure=False)
-                   for chunk in chunks]
-        solved = client.gather(futures)
-    return [column for chunk in solved for column in chunk], len(chunks)
+    chunks = [range(start, min(start + COLUMNS_PER_TASK, n)) for start in range(0, n, COLUMNS_PER_TASK)]
+    solved, tasks = spread(_solve_columns, chunks, shared=(instance, node_dist, hops, fir))
+    return [column for chunk in solved for column in chunk], tasks
 
 
 def solve_column(instance, j: int, node_dist: np.ndarray, hops: list[int], *, fir: bool):

@@ -48,8 +48,8 @@ from ..status import DIVERGED
 from .engines import ENGINES, FUSED_DENSE_NODES
 from .gcnn_bptt import GCNN_FEATURES, GCNN_TAPS, GCNNProblem, GCNNStack, _layout, gcnn_init, tap_map
 from .settings import SEED, TrainingSettings, takes_settings
-from .trainer import (Loop, Member, TrainingJob, best_member, curve, diverged_members_message, selection_costs,
-                      selection_set, simulated_design, train_jobs)
+from .trainer import (Loop, Member, TrainingJob, best_member, curve, diverged_members_message,
+                      finish_designs, selection_costs, selection_set, simulated_design, train_jobs)
 
 torch = lazy_import("torch")
 
@@ -301,7 +301,8 @@ def gcnn_batch(jobs, *, stack_size: int = 64) -> list[Design]:
         [TrainingJob(GCNNStack, [_member(job, m) for m in range(job.settings.ensemble)],
                      job.settings.loop(job.instance.horizon), options=(("engine", job.engine),))
          for job in parsed], stack_size=stack_size)
-    return [_finish(job, results, seconds[j]) for j, (job, results) in enumerate(zip(parsed, trained))]
+    return finish_designs(_finish, [(job, results, seconds[j]) for j, (job, results) in enumerate(zip(parsed, trained))],
+                          states=min(job.instance.n for job in parsed))
 
 
 def _controller(instance, params: dict) -> GCNNController:

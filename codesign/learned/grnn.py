@@ -32,8 +32,8 @@ from ..status import DIVERGED, OPTIMAL
 from .engines import ENGINES, resolve_engine
 from .grnn_bptt import ACTIVATIONS, GRNNStack, ModelSpec, init_fwg
 from .settings import SEED, TrainingSettings, takes_settings
-from .trainer import (Loop, TrainingJob, best_member, curve, diverged_members_message, selection_costs,
-                      selection_set, simulated_design, tanh_, train_jobs)
+from .trainer import (Loop, TrainingJob, best_member, curve, diverged_members_message, finish_designs,
+                      selection_costs, selection_set, simulated_design, tanh_, train_jobs)
 
 torch = lazy_import("torch")
 
@@ -472,7 +472,9 @@ def grnn_batch(jobs, *, stack_size: int = 128) -> list[Design]:
     refined_by_job = dict(zip(refine, refined))
     for j, extra in zip(refine, refine_seconds):
         seconds[j] += extra
-    return [_finish(job, first[j], chosen[j], refined_by_job.get(j), seconds[j]) for j, job in enumerate(parsed)]
+    return finish_designs(_finish, [(job, first[j], chosen[j], refined_by_job.get(j), seconds[j])
+                                    for j, job in enumerate(parsed)],
+                          states=min(job.instance.n for job in parsed))
 
 
 def _finish(job: _Job, first, chosen, refined, seconds) -> Design:

@@ -394,8 +394,7 @@ class GRNNStack(StackModel):
         prob = _Problem(specs, tdt)
         _, p, q = _node_sizes(prob, N)
         masks = np.stack([np.asarray(s.mask, dtype=bool) for s in specs])
-        supports = s_supports(np.stack([s.S0 for s in specs]), masks)
-        engine = resolve_engine(engine, p, q, nodes=N, support_density=supports.mean(axis=(1, 2)).max())
+        engine = self.engine_for(members, engine)
         self.dim = p * N
 
         def stack(name):
@@ -445,6 +444,21 @@ class GRNNStack(StackModel):
     def shape_key(cls, member: Member) -> tuple:
         s = member.problem
         return member.shape_key() + tuple(np.shape(getattr(s, k)) for k in ("A", "B", "S0", "F0", "W0", "G0"))
+
+    @staticmethod
+    def engine_for(members, engine: str) -> str:
+        """The engine a stack of ``members`` trains with (:func:`~codesign.learned.engines.resolve_engine`)."""
+        specs = [m.problem for m in members]
+        N = specs[0].S0.shape[0]
+        masks = np.stack([np.asarray(s.mask, dtype=bool) for s in specs])
+        supports = s_supports(np.stack([s.S0 for s in specs]), masks)
+        return resolve_engine(engine, specs[0].A.shape[1] // N, specs[0].B.shape[1] // N, nodes=N,
+                              support_density=supports.mean(axis=(1, 2)).max())
+
+    @classmethod
+    def independent(cls, members, loop: Loop, *, activation: str = "tanh", engine: str = "torch") -> bool:
+        """On the fused engine: it runs each model on its own, and Adam and the clip act per model."""
+        return cls.engine_for(members, engine) == "fused"
 
     def loss_and_grad(self, x0):
         loss, grads = self._loss_and_grad(x0)

@@ -33,6 +33,7 @@ from typing import Any, Literal
 import numpy as np
 
 from .._lazy import lazy_import
+from ..cluster import SPREAD_ABOVE, spread
 from ..design import Design
 from ..evaluation import simulate, simulate_to_precision, validation_set
 from ..status import DIVERGED, OPTIMAL
@@ -171,6 +172,16 @@ class StackModel:
     def shape_key(cls, member: Member) -> tuple:
         """Members with equal keys (and equal loops and options) train in one stack."""
         return member.shape_key()
+
+    @classmethod
+    def independent(cls, members, loop: "Loop", **options) -> bool:
+        """Whether each of ``members`` trains to the same bits alone as in a stack with the others.
+
+        Where it does, :func:`train_jobs` may train large members one per task of a dask
+        cluster (:mod:`codesign.cluster`). False by default: batched torch products and
+        reductions may round differently for another number of models.
+        """
+        return False
 
     def loss_and_grad(self, x0):
         raise NotImplementedError
@@ -367,11 +378,21 @@ class TrainingJob:
         return (self.model, self.options, self.loop, self.model.shape_key(member))
 
 
+def _timed_stack(model, loop, options, members) -> tuple[list[TrainResult], float]:
+    t0 = time.perf_counter()
+    out = train_stack(model, members, loop, **dict(options))
+    return out, time.perf_counter() - t0
+
+
 def train_jobs(jobs: list[TrainingJob], *, stack_size: int) -> tuple[list[list[TrainResult]], list[float]]:
     """Train every job's members, in stacks of up to ``stack_size`` models that share a key.
 
     Returns each job's results (one per member, in order) and its seconds: each
-    stack's time shared equally among its models.
+    stack's time shared equally among its models. Members of more than
+    :data:`~codesign.cluster.SPREAD_ABOVE` states whose model type trains them
+    :meth:`~StackModel.independent` of each other train one per stack, which, run
+    as a task of a dask cluster, are tasks of their own on its workers
+    (:func:`~codesign.cluster.spread`); the results are the same bits either way.
     """
     results = [[None] * len(job.members) for job in jobs]
     seconds = [0.0] * len(jobs)
@@ -380,15 +401,35 @@ def train_jobs(jobs: list[TrainingJob], *, stack_size: int) -> tuple[list[list[T
         for k, member in enumerate(job.members):
             groups.setdefault(job.key(member), []).append((j, k))
     for (model, options, loop, _), slots in groups.items():
-        for start in range(0, len(slots), stack_size):
-            chunk = slots[start:start + stack_size]
-            t0 = time.perf_counter()
-            out = train_stack(model, [jobs[j].members[k] for j, k in chunk], loop, **dict(options))
-            share = (time.perf_counter() - t0) / len(chunk)
-            for (j, k), result in zip(chunk, out):
+        members = [jobs[j].members[k] for j, k in slots]
+        alone = (len(members) > 1 and np.shape(members[0].curve_x0)[-1] > SPREAD_ABOVE
+                 and model.independent(members, loop, **dict(options)))
+        size = 1 if alone else stack_size
+        chunks = [list(range(start, min(start + size, len(slots)))) for start in range(0, len(slots), size)]
+        trained, _ = spread(_timed_stack, [[members[i] for i in chunk] for chunk in chunks],
+                            shared=(model, loop, options))
+        for chunk, (out, elapsed) in zip(chunks, trained):
+            for i, result in zip(chunk, out):
+                j, k = slots[i]
                 results[j][k] = result
-                seconds[j] += share
+                seconds[j] += elapsed / len(chunk)
     return results, seconds
+
+
+def _call(function, args: tuple):
+    return function(*args)
+
+
+def finish_designs(finish, args: list[tuple], *, states: int) -> list[Design]:
+    """``[finish(*a) for a in args]``: the designs of a batch, scored (the part after training).
+
+    Above :data:`~codesign.cluster.SPREAD_ABOVE` ``states``, where scoring one design
+    takes tens of seconds, each is a task of the dask cluster this runs in, if any
+    (:func:`~codesign.cluster.spread`). ``finish`` must be a module-level function.
+    """
+    if states <= SPREAD_ABOVE:
+        return [finish(*a) for a in args]
+    return spread(_call, args, shared=(finish,))[0]
 
 
 def selection_costs(results: list[TrainResult]) -> list[float]:

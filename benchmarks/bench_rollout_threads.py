@@ -41,7 +41,7 @@ def main():
     args = parser.parse_args()
     print(f"torch's default pool: {torch.get_num_threads()} threads")
     print(f"{'controller':10s} {'N':>4s} {'default pool':>13s} {'one thread':>11s} {'ratio':>7s}")
-    held = evaluation._one_torch_thread
+    held = evaluation.one_torch_thread
     for n in (20, 100):
         inst = paper_instance(1, n=n, a_norm=1.05)
         x0 = evaluation.validation_set(inst, 2000)
@@ -49,11 +49,11 @@ def main():
             def run():
                 evaluation.simulate(inst, design.controller, x0)
 
-            evaluation._one_torch_thread = contextlib.nullcontext
+            evaluation.one_torch_thread = contextlib.nullcontext
             try:
                 before = seconds(run, args.repeats)
             finally:
-                evaluation._one_torch_thread = held
+                evaluation.one_torch_thread = held
             after = seconds(run, args.repeats)
             print(f"{name:10s} {n:4d} {before:11.3f} s {after:9.3f} s {before / after:6.1f}x", flush=True)
 

@@ -24,8 +24,6 @@ the validation estimates that happened to miss a rare costly state
 
 from __future__ import annotations
 
-import sys
-from contextlib import contextmanager
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -33,6 +31,7 @@ import numpy as np
 from .estimators import (MIN_CV_DRAWS, TiltedProposal, control_variate_estimate, fitted_cost_form, importance_estimate,
                          projected_relative_stderr)
 from .instances import FAST_DARE_ABOVE
+from .threads import one_torch_thread
 
 __all__ = [
     "static_gain_cost",
@@ -592,29 +591,6 @@ class Rollout:
 
 
 
-@contextmanager
-def _one_torch_thread():
-    """Torch's intra-op pool at one thread for the duration of a rollout, if torch is loaded.
-
-    A rollout alternates numpy (OpenBLAS) products with a controller's torch calls
-    (the GRNN's tanh, the GCNN's layers) on arrays far too small to share out. With
-    both pools at their default sizes, each pool's threads spin-wait on the cores the
-    other needs: on 2 cores a GRNN's 2000-draw rollout at N = 20 took 0.44-1.0 s
-    against 0.07 s with torch at one thread (N = 100: 1.8 s against 0.46 s; the GCNN
-    0.42 against 0.15 s). The harness's workers already run single-threaded; this
-    gives a notebook the same speed. Elementwise results do not depend on the pool size.
-    """
-    torch = sys.modules.get("torch")
-    before = torch.get_num_threads() if torch is not None else 1
-    if before == 1:
-        yield
-        return
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
-
 
 def simulate(
     instance,
@@ -668,7 +644,7 @@ def simulate(
     max_state = float(np.max(np.abs(x)))
     state = controller.reset(batch)
     bounded = True
-    with np.errstate(over="ignore", invalid="ignore"), _one_torch_thread():
+    with np.errstate(over="ignore", invalid="ignore"), one_torch_thread():
         for _ in range(steps):
             u, state = controller.step(state, x)
             stage, x = plant.advance(x, u)
@@ -727,7 +703,7 @@ def local_cost_form(instance, controller, scale: float = _LOCAL_SCALE) -> np.nda
     x = np.vstack([scale * np.eye(n), -scale * np.eye(n)])
     state = controller.reset(2 * n)
     form = np.zeros((n, n))
-    with np.errstate(over="ignore", invalid="ignore"), _one_torch_thread():
+    with np.errstate(over="ignore", invalid="ignore"), one_torch_thread():
         for _ in range(instance.horizon):
             u, state = controller.step(state, x)
             dx, du = (x[:n] - x[n:]) / (2 * scale), (u[:n] - u[n:]) / (2 * scale)

@@ -66,6 +66,16 @@ class Style:
         """Marker face colour: "none" (see-through) for the variants drawn hollow (:data:`HOLLOW`), else the colour."""
         return "none" if (self.colour, self.marker) in _HOLLOW_PAIRS else self.colour
 
+    @property
+    def edge(self) -> str:
+        """Marker edge colour: white around a solid filled marker (it stands out from its line),
+        else the colour: hollow markers, and those drawn by their edges alone ("x", "+"), which a
+        white edge erases (the autonomous loop's "x" was invisible in every figure until 2026-11-26)."""
+        from matplotlib.markers import MarkerStyle
+
+        solid = self.face == self.colour and MarkerStyle(self.marker).is_filled()
+        return "white" if solid else self.colour
+
     # A Style unpacks as (colour, marker), as the figures' older label -> (colour, marker) tables did.
     def __iter__(self):
         return iter((self.colour, self.marker))

@@ -180,20 +180,22 @@ def test_localized_sls_spreads_its_columns_over_the_dask_cluster(tmp_path):
 LEARNED_SPREAD_SPEC = """
 name = "spread"
 [instances]
-n = [210]
+n = [24]
 seeds = 2
-horizon = 5
+horizon = 20
 [[methods]]
 method = "grnn"
-params = { steps = 3, ensemble = 2, stability_steps = 0 }
+params = { steps = 30, ensemble = 2, stability_steps = 0 }
 """
 
 
-def test_learned_batch_spreads_its_models_and_scoring_over_the_dask_cluster(tmp_path):
-    """Above SPREAD_ABOVE states, a GRNN batch on a dask cluster trains each fused-engine model as
-    a task of its own and scores each design as another: the same designs as in one local process,
-    to the last bit."""
+def test_learned_batch_spreads_its_models_and_scoring_over_the_dask_cluster(tmp_path, monkeypatch):
+    """Above SPREAD_ABOVE states (lowered here to 10, so that N = 24 stands for a large instance), a
+    GRNN batch on a dask cluster trains each fused-engine model as a task of its own and scores each
+    design as another: the same designs as in one local process, to the last bit."""
     distributed = pytest.importorskip("distributed")
+    from codesign.learned import trainer
+
     seen = {}
     real = distributed.Client.submit
 
@@ -201,17 +203,18 @@ def test_learned_batch_spreads_its_models_and_scoring_over_the_dask_cluster(tmp_
         seen[function.__name__] = seen.get(function.__name__, 0) + 1
         return real(self, function, *args, **kwargs)
 
-    with pytest.MonkeyPatch.context() as patch:
-        # Counts the tasks the design submits from its worker (a worker_client in that process):
-        # the workers are threads of this process here, so the patch reaches them.
-        patch.setattr(distributed.Client, "submit", counting_submit)
-        spec = parse_spec(LEARNED_SPREAD_SPEC)
-        with Store(tmp_path / "local.sqlite") as store:
-            run_experiment(spec, store, workers=1, progress=False)
-        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                      dashboard_address=None) as cluster:
-            with distributed.Client(cluster) as client, Store(tmp_path / "dask.sqlite") as store:
-                run_experiment(spec, store, executor=client.get_executor(pure=False), progress=False)
+    # The workers are threads of this process (processes=False), so both patches reach them: the
+    # threshold, and the count of the tasks the design submits from its worker.
+    monkeypatch.setattr(trainer, "SPREAD_ABOVE", 10)
+    monkeypatch.setattr(distributed.Client, "submit", counting_submit)
+    spec = parse_spec(LEARNED_SPREAD_SPEC)
+    with Store(tmp_path / "local.sqlite") as store:
+        run_experiment(spec, store, workers=1, progress=False)
+    assert not seen
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        with distributed.Client(cluster) as client, Store(tmp_path / "dask.sqlite") as store:
+            run_experiment(spec, store, executor=client.get_executor(pure=False), progress=False)
     local, remote = _dump(tmp_path / "local.sqlite"), _dump(tmp_path / "dask.sqlite")
     assert len(local) == 2 and local == remote and all(row[-1] == "optimal" for row in local)
     assert seen.get("_timed_stack") == 4 and seen.get("_call") == 2, seen

@@ -200,9 +200,16 @@ method = "autonomous"
                                    ("table1-lookalike", "", False)):
         out = tmp_path / name
         with Store(out / "results.sqlite") as store:
-            run_experiment(parse_spec(spec.format(name=name, report=report)), store, progress=False)
+            run_experiment(parse_spec(spec.format(name=name, report=report)), store, workers=1, progress=False)
             _write_report(store, out)
         assert ("## Table 1" in (out / "report.md").read_text()) is expected
+        # LQR is the only design on the axis here (the autonomous loop is off it): the off-scale
+        # triangle sits on the axis's top edge, not at LQR's rounding-level excess of -3e-12,
+        # which a log axis put 300,000 px below and made a 1506 x 389,685 px figure.
+        from PIL import Image
+
+        for png in out.glob("*.png"):
+            assert max(Image.open(png).size) < 4000, (png.name, Image.open(png).size)
 
 
 def test_off_scale_values_get_one_label_per_value_and_neighbours_go_a_row_lower():
@@ -276,3 +283,20 @@ def test_report_warns_about_costs_that_stay_imprecise_after_refinement():
     assert text.startswith(" 3 simulated costs keep a relative standard error above 1%")
     assert "(1 of GCNN on N = 20, ‖A‖₂ = 1.05; 2 of GRNN on N = 20, ‖A‖₂ = 1.2)" in text
     assert "rare initial states" in text and "docs/evaluation.md" in text
+
+
+def test_every_built_in_marker_is_visible_on_white():
+    """A solid filled marker gets a white edge (it stands out from its line); a marker drawn by its
+    edges alone ("x", "+") or hollow keeps its colour there: with a white edge the autonomous loop's
+    "x" vanished from every figure."""
+    from matplotlib.markers import MarkerStyle
+
+    from compare.styles import METHOD_STYLES, Style
+
+    assert Style("#555555", "x", "none").edge == "#555555"
+    assert Style("#1f77b4", "o").edge == "white"
+    for key, (colour, marker, info_model) in METHOD_STYLES.items():
+        style = Style(colour, marker, info_model)
+        visible = style.edge == style.colour or (MarkerStyle(marker).is_filled() and style.face == colour)
+        assert visible, key
+    assert Style(*METHOD_STYLES["autonomous"]).edge == METHOD_STYLES["autonomous"][0]

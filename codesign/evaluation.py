@@ -590,8 +590,6 @@ class Rollout:
         return summary
 
 
-
-
 def simulate(
     instance,
     controller,

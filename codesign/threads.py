@@ -38,4 +38,3 @@ def one_torch_thread():
         yield
     finally:
         torch.set_num_threads(before)
-

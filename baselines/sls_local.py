@@ -94,7 +94,6 @@ def solve_column(instance, j: int, node_dist: np.ndarray, hops: list[int], *, fi
     column is infeasible.
     """
     import scipy.sparse as sp
-    import scipy.sparse.linalg
 
     T = len(hops) - 1
     A, B = instance.A, instance.B

@@ -26,6 +26,9 @@ from .styles import BOUND_COLOUR  # noqa: E402
 __all__ = ["plot_forest"]
 
 _TOO_FEW_COLOUR = "#999999"
+_TICK_POINTS = 8  # tick labels' font size
+_OVERHANG = 0.06  # inches a tick label may reach past its panel: under half the gap between panels
+_HEADING_INDENT, _PAIR_INDENT = 0.08, 0.18  # inches from the figure's left edge to the group headings, pair names
 
 
 def _num(x: float) -> str:
@@ -71,18 +74,61 @@ def _symlog_axis(ax, values) -> float:
     exponents = range(exponent, top + 1)
     ticks = ([-(10.0 ** e) for e in exponents if -(10.0 ** e) >= lo - linthresh] + [0.0]
              + [10.0 ** e for e in exponents if 10.0 ** e <= hi + linthresh])
-    # 8 pt labels need ~0.35 in each: label every other decade when there are many (keeping ±0.01 and ±1,
-    # where most differences lie), and never ±linthresh, which sits next to the 0 label.
-    step = 1 if len(ticks) <= 7 else 2
-    labelled = [t for t in ticks if t == 0 or (abs(t) > linthresh and round(np.log10(abs(t))) % step == 0)]
-    ax.xaxis.set_major_locator(FixedLocator(labelled))
-    ax.xaxis.set_minor_locator(FixedLocator(sorted(set(ticks) - set(labelled))))
-    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: "0" if v == 0 else f"{v:+g}"))
-    ax.xaxis.set_minor_formatter(NullFormatter())
     edge = max(abs(lo), abs(hi), linthresh)
     ax.set_xlim(lo * 2.0 - linthresh * 0.5 if lo < 0 else -linthresh, hi * 2.0 + linthresh * 0.5 if hi > 0
                 else linthresh)
+    labelled = _clear_labels(ax, [t for t in ticks if t == 0 or abs(t) > linthresh])
+    ax.xaxis.set_major_locator(FixedLocator(labelled))
+    ax.xaxis.set_minor_locator(FixedLocator(sorted(set(ticks) - set(labelled))))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: _tick_text(v)))
+    ax.xaxis.set_minor_formatter(NullFormatter())
     return edge
+
+
+def _inches(text: str, points: float) -> float:
+    """Printed width of one line of text in DejaVu Sans (matplotlib's default font) at ``points``."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import TextToPath
+
+    return TextToPath().get_text_width_height_descent(text, FontProperties(size=points), ismath=False)[0] / 72.0
+
+
+def _tick_text(value: float) -> str:
+    return "0" if value == 0 else f"{value:+g}"
+
+
+def _clear_labels(ax, ticks) -> list[float]:
+    """The ticks whose labels fit side by side on their panel as laid out: 0, then ±0.01 and ±1, then the rest.
+
+    ``+t`` and ``-t`` are kept together, each pair only where both labels fit.
+
+    ±linthresh is never offered (it sits next to the 0 label). A decade of a
+    symlog axis can be narrower than its label on a small panel (four panels
+    side by side), so each label is kept only where it clears those kept before
+    it, in that order of importance: most differences lie near ±0.01 and ±1.
+    """
+    dpi = ax.figure.dpi
+
+    def inches(value):
+        return ax.transData.transform((value, 0.0))[0] / dpi
+
+    def half_width(value):  # the label's printed width, and a gap of 0.06 in
+        return (_inches(_tick_text(value), _TICK_POINTS) + 0.06) / 2.0
+
+    left, right = (x / dpi for x in ax.transAxes.transform([(0.0, 0.0), (1.0, 0.0)])[:, 0])
+
+    def fits(t, kept):
+        inside = left - _OVERHANG <= inches(t) - half_width(t) and inches(t) + half_width(t) <= right + _OVERHANG
+        return inside and all(abs(inches(t) - inches(k)) >= half_width(t) + half_width(k) for k in kept)
+
+    # ±t are labelled together or not at all, so that the axis reads the same both ways.
+    pairs = sorted({abs(t) for t in ticks}, key=lambda a: (a != 0, a != 0 and round(np.log10(a)) % 2 != 0, a))
+    kept: list[float] = []
+    for magnitude in pairs:
+        pair = [t for t in ticks if abs(t) == magnitude]
+        if all(fits(t, kept + [o for o in pair if o != t]) for t in pair):
+            kept += pair
+    return sorted(kept)
 
 
 def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None):
@@ -129,9 +175,11 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
             y += height
             blocks.append((pair, start, y))
     total = max(y, 1.0)
-    # The label column holds the two-line pair names (~0.065 in a character at 8 pt) and the budgets.
-    longest = max([len(a) for (a, _), _, _ in blocks] + [len(b) + 2 for (_, b), _, _ in blocks] + [20])
-    label_width = 0.2 + 0.06 * longest + 0.5
+    # The label column holds the two-line pair names, then the budgets (the y tick labels), as printed.
+    names = max([_inches(a, 8) for (a, _), _, _ in blocks] + [_inches(f"− {b}", 8) for (_, b), _, _ in blocks]
+                + [1.2])
+    budgets = max([_inches(_budget_text(b, by_node), _TICK_POINTS) for (_, _, b) in row_y] + [0.3])
+    label_width = _PAIR_INDENT + names + 0.15 + budgets + 0.1
     created = axes is None
     if created:
         width = label_width + 2.7 * max(1, len(panels))
@@ -159,7 +207,7 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
                 _draw_row(ax, c, ry, styles, edge)
         n = max((c.panel_instances for c in comparisons if c.panel == panel), default=0)
         ax.set_title(f"{panel_title(panel)}\n{n} instances", fontsize=9)
-        ax.tick_params(axis="both", labelsize=8)
+        ax.tick_params(axis="both", labelsize=_TICK_POINTS)
         ax.grid(axis="x", color="0.85", linewidth=0.5, which="both")
         ax.set_axisbelow(True)
         ax.set_xlabel("Δ cost, first − second", fontsize=8)
@@ -168,13 +216,13 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
     first.set_yticks([ry for ry in row_y.values()], [_budget_text(b, by_node) for (_, _, b) in row_y], fontsize=8)
     for ax in axes[1:]:
         ax.tick_params(axis="y", left=False, labelleft=False)
-    left = blended_transform_factory(fig.transFigure, first.transData)
+    left = blended_transform_factory(fig.dpi_scale_trans, first.transData)  # x in inches from the figure's edge
     for group, hy in headings:
-        first.text(0.006, hy + 0.45, group, transform=left, fontsize=8.5, fontweight="bold", va="center",
-                   ha="left", clip_on=False)
+        first.text(_HEADING_INDENT, hy + 0.45, group, transform=left, fontsize=8.5, fontweight="bold",
+                   va="center", ha="left", clip_on=False)
     for (a, b), start, stop in blocks:
-        first.text(0.014, (start + stop) / 2, f"{a}\n− {b}", transform=left, fontsize=8, va="center", ha="left",
-                   clip_on=False, linespacing=1.05)
+        first.text(_PAIR_INDENT, (start + stop) / 2, f"{a}\n− {b}", transform=left, fontsize=8, va="center",
+                   ha="left", clip_on=False, linespacing=1.05)
     if not comparisons:
         first.text(0.5, 0.5, "no comparisons", transform=first.transAxes, ha="center", va="center")
     if created:

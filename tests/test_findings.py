@@ -334,3 +334,48 @@ def test_budgets_are_links_per_node_in_each_panel():
     labels = [t.get_text() for t in axes[0].get_yticklabels()]
     assert {"≤ 1/node", "≤ 3/node", "≤ 7/node", "any"} <= set(labels) and not any("≤ 24" in x for x in labels)
     plt.close(fig)
+
+
+@pytest.mark.parametrize("panel_inches", [1.6, 4.0])
+def test_forest_tick_labels_never_overlap_and_stay_inside_their_panel(panel_inches):
+    """Four narrow panels side by side (scale-large) once printed "+0.001+0.01" as one word."""
+    from compare.forest import _symlog_axis
+
+    fig, axes = plt.subplots(1, 4, figsize=(1.0 + 4 * panel_inches, 2.0))
+    fig.subplots_adjust(left=0.5 / fig.get_figwidth(), right=0.98, wspace=0.06)
+    values = [-0.015, -0.012, -0.002, 0.0004, 0.02]
+    for ax in axes:
+        _symlog_axis(ax, values)
+        ax.tick_params(axis="both", labelsize=8)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    for ax in axes:
+        labels = sorted((t for t in ax.get_xticklabels() if t.get_text()), key=lambda t: t.get_position()[0])
+        boxes = [t.get_window_extent(renderer) for t in labels]
+        texts = [t.get_text() for t in labels]
+        assert "0" in texts and "-0.01" in texts and "+0.01" in texts
+        for left, right in zip(boxes, boxes[1:]):
+            assert left.x1 < right.x0, texts
+        frame = ax.get_window_extent(renderer)
+        reach = 0.06 * fig.dpi + 1  # a label may overhang its panel by under half the gap between panels
+        assert frame.x0 - reach <= boxes[0].x0 and boxes[-1].x1 <= frame.x1 + reach, texts
+    if panel_inches > 3:  # room for every decade: nothing is dropped but ±linthresh
+        assert {"-0.001", "+0.001"} <= set(texts)
+    plt.close(fig)
+
+
+def test_forest_pair_names_end_before_the_budget_labels(comparisons):
+    """Long method labels ("Linear GRNN-Sparse (β path, 150 steps)") once ran into "≤ 3/node": widths are measured."""
+    # Six panels, as in the scale report: the old layout placed the names at a fraction of the figure's width.
+    long = [replace(c, a=f"LINEAR {c.a.upper()} (WIDE CAPITALS, 150 STEPS)", panel=(c.panel[0], n, a_norm),
+                    budget=None if c.budget is None else c.budget * n // 20)
+            for n in (20, 50, 100) for a_norm in (0.995, 1.05) for c in comparisons]
+    fig, axes = plot_forest(long, {})
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    budgets = [t.get_window_extent(renderer) for t in axes[0].get_yticklabels() if t.get_text()]
+    names = [t.get_window_extent(renderer) for t in axes[0].texts if "\n− " in t.get_text()]
+    assert budgets and names
+    assert any("/node" in t.get_text() for t in axes[0].get_yticklabels())
+    assert max(box.x1 for box in names) < min(box.x0 for box in budgets)
+    plt.close(fig)

@@ -108,6 +108,26 @@ def test_cost_does_not_increase_with_denser_graph(inst, family):
         assert {"speed", "act_delay", "horizon", "fir"} <= set(design.params)
 
 
+def test_graphs_with_the_same_edges_are_solved_once(inst, family, monkeypatch):
+    """plant^2, plant^3 and complete coincide on this instance: one QP, the same design to the bit."""
+    distinct = {topology(inst, name).tobytes() for name in family}
+    assert len(distinct) < len(family)  # else this test checks nothing
+    solves = []
+    solve = sls_module._solve_qp
+    monkeypatch.setattr(sls_module, "_solve_qp", lambda *a, **k: solves.append(1) or solve(*a, **k))
+    again = {d.params["graph"]: d for d in sls_topologies(inst)}
+    assert len(solves) == len(distinct)
+    for name, design in again.items():
+        alone = sls(inst, graph=name)
+        assert (design.status, design.links) == (alone.status, alone.links)
+        assert design.cost == alone.cost or (np.isnan(design.cost) and np.isnan(alone.cost))
+        assert design.params == alone.params
+        first = design.extras.get("same_graph_as")
+        if first is not None:
+            assert np.array_equal(topology(inst, first), topology(inst, name)) and first != name
+            np.testing.assert_array_equal(design.controller.phi_x, alone.controller.phi_x)
+
+
 def test_given_graph_at_plant_speed_is_qi_and_feasible(inst):
     # The plant is the 3-hop closure of the given graph: three hops per step is as fast.
     assert is_quadratically_invariant(inst, inst.comm_adj, speed=3).qi

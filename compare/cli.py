@@ -24,13 +24,13 @@ PRESET_TIMES = {
     "baselines-small": "~20 s (16 s measured)",
     "sls-small": "~15 s (15 s measured)",
     "table1-small": "~40 s (38 s measured)",
-    "table1": "~5 min (298 s measured)",
-    "tradeoff": "~25 min (1495 s measured)",
-    "systems": "~3 min (177 s measured)",
+    "table1": "~5 min (298-320 s measured)",
+    "tradeoff": "~25 min (1466 s measured)",
+    "systems": "~3 min (177-194 s measured)",
     "scale": "~21 min (1287 s measured)",
     "small": "~7 min (420 s measured)",
     "benchmark-systems": "~6.5 min (384 s measured)",
-    "scale-large": "~10 min (583 s measured, 577 s of runs)",
+    "scale-large": "~63 min (3806 s measured)",
 }
 
 

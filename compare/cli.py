@@ -28,8 +28,8 @@ PRESET_TIMES = {
     "tradeoff": "~25 min (1466 s measured)",
     "systems": "~3 min (177-194 s measured)",
     "scale": "~17 min (1023 s measured)",
-    "small": "~7 min (420 s measured)",
-    "benchmark-systems": "~6.5 min (384 s measured)",
+    "small": "~7.5 min (420-465 s measured)",
+    "benchmark-systems": "~6 min (349 s measured)",
     "scale-large": "~63 min (3806 s measured)",
 }
 

@@ -26,7 +26,7 @@ from .styles import BOUND_COLOUR  # noqa: E402
 __all__ = ["plot_forest"]
 
 _TOO_FEW_COLOUR = "#999999"
-_TICK_POINTS = 8  # tick labels' font size
+_TICK_POINTS = _NAME_POINTS = 8  # font sizes of the tick labels (budgets included) and of the pair names
 _OVERHANG = 0.06  # inches a tick label may reach past its panel: under half the gap between panels
 _HEADING_INDENT, _PAIR_INDENT = 0.08, 0.18  # inches from the figure's left edge to the group headings, pair names
 
@@ -176,8 +176,8 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
             blocks.append((pair, start, y))
     total = max(y, 1.0)
     # The label column holds the two-line pair names, then the budgets (the y tick labels), as printed.
-    names = max([_inches(a, 8) for (a, _), _, _ in blocks] + [_inches(f"− {b}", 8) for (_, b), _, _ in blocks]
-                + [1.2])
+    names = max([_inches(a, _NAME_POINTS) for (a, _), _, _ in blocks]
+                + [_inches(f"− {b}", _NAME_POINTS) for (_, b), _, _ in blocks] + [1.2])
     budgets = max([_inches(_budget_text(b, by_node), _TICK_POINTS) for (_, _, b) in row_y] + [0.3])
     label_width = _PAIR_INDENT + names + 0.15 + budgets + 0.1
     created = axes is None
@@ -213,7 +213,8 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
         ax.set_xlabel("Δ cost, first − second", fontsize=8)
     first = axes[0]
     first.set_ylim(total + 0.2, 0.0)
-    first.set_yticks([ry for ry in row_y.values()], [_budget_text(b, by_node) for (_, _, b) in row_y], fontsize=8)
+    first.set_yticks([ry for ry in row_y.values()], [_budget_text(b, by_node) for (_, _, b) in row_y],
+                     fontsize=_TICK_POINTS)
     for ax in axes[1:]:
         ax.tick_params(axis="y", left=False, labelleft=False)
     left = blended_transform_factory(fig.dpi_scale_trans, first.transData)  # x in inches from the figure's edge
@@ -221,8 +222,8 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
         first.text(_HEADING_INDENT, hy + 0.45, group, transform=left, fontsize=8.5, fontweight="bold",
                    va="center", ha="left", clip_on=False)
     for (a, b), start, stop in blocks:
-        first.text(_PAIR_INDENT, (start + stop) / 2, f"{a}\n− {b}", transform=left, fontsize=8, va="center",
-                   ha="left", clip_on=False, linespacing=1.05)
+        first.text(_PAIR_INDENT, (start + stop) / 2, f"{a}\n− {b}", transform=left, fontsize=_NAME_POINTS,
+                   va="center", ha="left", clip_on=False, linespacing=1.05)
     if not comparisons:
         first.text(0.5, 0.5, "no comparisons", transform=first.transAxes, ha="center", va="center")
     if created:

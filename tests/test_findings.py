@@ -365,7 +365,7 @@ def test_forest_tick_labels_never_overlap_and_stay_inside_their_panel(panel_inch
 
 
 def test_forest_pair_names_end_before_the_budget_labels(comparisons):
-    """Long method labels ("Linear GRNN-Sparse (β path, 150 steps)") once ran into "≤ 3/node": widths are measured."""
+    """Long labels ("Linear GRNN-Sparse (β path, 150 steps)") once ran into "≤ 3/node": widths are measured."""
     # Six panels, as in the scale report: the old layout placed the names at a fraction of the figure's width.
     long = [replace(c, a=f"LINEAR {c.a.upper()} (WIDE CAPITALS, 150 STEPS)", panel=(c.panel[0], n, a_norm),
                     budget=None if c.budget is None else c.budget * n // 20)

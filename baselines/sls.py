@@ -479,11 +479,10 @@ def sls_topologies(
         with Timer() as timer:
             edges = topology(instance, name).tobytes()
             first = solved.get(edges)
-            if first is None:
-                design = solved[edges] = sls(instance, graph=name, speed=speed, act_delay=act_delay,
-                                             horizon=horizon, fir=fir)
-            else:
-                design = replace(first, params={**first.params, "graph": name},
-                                 extras={**first.extras, "same_graph_as": first.params["graph"]})
-        designs.append(design if first is None else replace(design, seconds=timer.seconds))
+        if first is None:
+            designs.append(solved.setdefault(edges, sls(instance, graph=name, speed=speed, act_delay=act_delay,
+                                                        horizon=horizon, fir=fir)))
+        else:
+            designs.append(replace(first, params={**first.params, "graph": name}, seconds=timer.seconds,
+                                   extras={**first.extras, "same_graph_as": first.params["graph"]}))
     return designs

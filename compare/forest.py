@@ -88,9 +88,9 @@ def _symlog_axis(ax, values) -> float:
 def _inches(text: str, points: float) -> float:
     """Printed width of one line of text in DejaVu Sans (matplotlib's default font) at ``points``."""
     from matplotlib.font_manager import FontProperties
-    from matplotlib.textpath import TextToPath
+    from matplotlib.textpath import text_to_path
 
-    return TextToPath().get_text_width_height_descent(text, FontProperties(size=points), ismath=False)[0] / 72.0
+    return text_to_path.get_text_width_height_descent(text, FontProperties(size=points), ismath=False)[0] / 72.0
 
 
 def _tick_text(value: float) -> str:
@@ -108,18 +108,14 @@ def _clear_labels(ax, ticks) -> list[float]:
     it, in that order of importance: most differences lie near ±0.01 and ±1.
     """
     dpi = ax.figure.dpi
-
-    def inches(value):
-        return ax.transData.transform((value, 0.0))[0] / dpi
-
-    def half_width(value):  # the label's printed width, and a gap of 0.06 in
-        return (_inches(_tick_text(value), _TICK_POINTS) + 0.06) / 2.0
-
+    # Each tick's centre and half its label's width (with a gap of 0.06 in), in inches on the figure.
+    centre = {t: ax.transData.transform((t, 0.0))[0] / dpi for t in ticks}
+    half = {t: (_inches(_tick_text(t), _TICK_POINTS) + 0.06) / 2.0 for t in ticks}
     left, right = (x / dpi for x in ax.transAxes.transform([(0.0, 0.0), (1.0, 0.0)])[:, 0])
 
     def fits(t, kept):
-        inside = left - _OVERHANG <= inches(t) - half_width(t) and inches(t) + half_width(t) <= right + _OVERHANG
-        return inside and all(abs(inches(t) - inches(k)) >= half_width(t) + half_width(k) for k in kept)
+        inside = left - _OVERHANG <= centre[t] - half[t] and centre[t] + half[t] <= right + _OVERHANG
+        return inside and all(abs(centre[t] - centre[k]) >= half[t] + half[k] for k in kept)
 
     # ±t are labelled together or not at all, so that the axis reads the same both ways.
     pairs = sorted({abs(t) for t in ticks}, key=lambda a: (a != 0, a != 0 and round(np.log10(a)) % 2 != 0, a))

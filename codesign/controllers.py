@@ -12,7 +12,12 @@ A controller is any object with
     without pickles).
 
 Linear controllers may also offer ``closed_loop_responses(instance)`` for exact
-costs.
+costs, and any controller ``rollout(instance, x0, steps) -> (costs, peaks)``: each
+draw's summed stage and terminal cost (not divided by trace P) and each step's
+largest ``|x|``, computed in one pass, or None where it does not apply.
+:func:`~codesign.evaluation.simulate` takes it for noiseless rollouts that stay
+bounded, and the step loop otherwise (the GRNN's: 2-5x faster,
+``benchmarks/bench_grnn_rollout.py``).
 """
 
 from __future__ import annotations

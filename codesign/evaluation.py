@@ -636,11 +636,37 @@ def simulate(
     steps = instance.horizon if steps is None else int(steps)
     rng = np.random.default_rng(seed) if noise_std else None
     batch = x.shape[0]
-    plant = _RolloutPlant(instance)
     x_start = x
-    costs = np.zeros(batch)
     max_state = float(np.max(np.abs(x)))
-    state = controller.reset(batch)
+    compiled = getattr(controller, "rollout", None)
+    # A controller may roll a noiseless batch out in one compiled pass (the GRNN's): taken only
+    # while every state stays within the bound, where it computes what the step loop would.
+    result = compiled(instance, x, steps) if compiled is not None and rng is None and instance.n <= STRUCTURED_ABOVE \
+        else None
+    if result is not None and np.all(result[1] <= bound) and np.all(np.isfinite(result[0])):
+        costs, bounded = result[0], True
+        max_state = float(max([max_state, *result[1]]))
+    else:
+        costs, bounded, max_state = _step_loop(instance, controller, x, steps, noise_std, rng, bound, max_state)
+    costs = costs / instance.trace_P
+    if not bounded or not np.all(np.isfinite(costs)):
+        inf = float("inf")
+        return Rollout(inf, inf, costs, False, max_state, steps, inf, inf)
+    plain, plain_stderr = float(costs.mean()), float(costs.std(ddof=1) / np.sqrt(batch))
+    cost, stderr, estimator = plain, plain_stderr, "sample mean"
+    if control_variates and batch >= MIN_CV_DRAWS:
+        cost, stderr, estimator = control_variate_estimate(instance, x_start, costs, cost_form)
+    return Rollout(cost, stderr, costs, True, max_state, steps, plain, plain_stderr, estimator)
+
+
+def _step_loop(instance, controller, x, steps, noise_std, rng, bound, max_state):
+    """:func:`simulate`'s rollout one step at a time: costs (not divided by trace P), bounded, max_state.
+
+    An unbounded rollout stops at the first step whose largest state leaves ``bound``.
+    """
+    plant = _RolloutPlant(instance)
+    costs = np.zeros(x.shape[0])
+    state = controller.reset(x.shape[0])
     bounded = True
     with np.errstate(over="ignore", invalid="ignore"), one_torch_thread():
         for _ in range(steps):
@@ -655,15 +681,7 @@ def simulate(
                 bounded = False
                 break
         costs += np.einsum("bi,bi->b", x @ instance.P, x)
-    costs = costs / instance.trace_P
-    if not bounded or not np.all(np.isfinite(costs)):
-        inf = float("inf")
-        return Rollout(inf, inf, costs, False, max_state, steps, inf, inf)
-    plain, plain_stderr = float(costs.mean()), float(costs.std(ddof=1) / np.sqrt(batch))
-    cost, stderr, estimator = plain, plain_stderr, "sample mean"
-    if control_variates and batch >= MIN_CV_DRAWS:
-        cost, stderr, estimator = control_variate_estimate(instance, x_start, costs, cost_form)
-    return Rollout(cost, stderr, costs, True, max_state, steps, plain, plain_stderr, estimator)
+    return costs, bounded, max_state
 
 
 def _pooled(batches: list[tuple[int, float, float]]) -> tuple[float, float]:

@@ -37,6 +37,9 @@ from .trainer import (Loop, TrainingJob, best_member, curve, diverged_members_me
 
 torch = lazy_import("torch")
 
+#: Imported on use (numba loads with it), and part of the fingerprint of every method that uses this module.
+FINGERPRINT_MODULES = ("codesign.learned.grnn_rollout",)
+
 __all__ = ["GRNNController", "LinearGRNNController", "GRNNSettings", "grnn", "grnn_batch", "VARIANTS",
            "ACTIVATIONS", "grnn_defaults", "paper_beta", "PAPER_BETA"]
 
@@ -166,6 +169,21 @@ class GRNNController:
             return (self.G @ Z.reshape(h, batch * n)).reshape(batch, n)
         return np.einsum("kc,kbn->bcn", self.G, Z).reshape(batch, -1)[:, self._input_index]
 
+    #: The activation of the compiled rollout (tanh; the identity in LinearGRNNController).
+    _squash = True
+
+    def rollout(self, instance, x0, steps: int):
+        """Each draw's cost and each step's peak state from one compiled pass (:mod:`.grnn_rollout`).
+
+        None where that pass does not apply: node blocks, S taken sparse above
+        STRUCTURED_ABOVE nodes, or a plant without one input per node.
+        """
+        if self.blocks or self._S_op is not None or instance.m != instance.n or instance.n != self.S.shape[0]:
+            return None
+        from .grnn_rollout import rollout_costs  # numba loads on first use
+
+        return rollout_costs(instance, self.S, self.F, self.W, self.G, x0, steps, squash=self._squash)
+
     def step(self, state, x):
         Z = self._pre_activation(state, x)
         # tanh as 2 sigmoid(2 z) - 1 through torch (shared memory, in place): numpy's float64
@@ -240,6 +258,8 @@ class LinearGRNNController(GRNNController):
     :func:`codesign.exact_cost`) and :meth:`linearized_closed_loop` is its exact
     closed loop.
     """
+
+    _squash = False
 
     def step(self, state, x):
         Z = self._pre_activation(state, x)

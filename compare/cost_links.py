@@ -224,7 +224,7 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
             ax.plot(x[inside], excess(y[inside], bottom), color=s.colour, marker=s.marker,
                     linestyle=s.linestyle if inside.sum() > 1 else "none", markersize=(6.5 if len(x) == 1 else 5.5) * (1.5 if s.marker == "*" else 1),
                     markerfacecolor=s.face, markeredgecolor=s.edge,
-                    markeredgewidth=0.6 if s.edge == "white" else 1.2, linewidth=1.3, transform=transform,
+                    markeredgewidth=s.edge_width, linewidth=1.3, transform=transform,
                     # Single-setting methods over the paths whose ends they share (decentralized = γ = ∞).
                     zorder=6 if label.startswith("LQR") else 5 if len(x) == 1 else 4, clip_on=False,
                     gid=method_gid(label))

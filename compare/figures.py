@@ -260,7 +260,7 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
                 k = int(np.searchsorted(f.budgets, f.start))
                 ax.plot(f.budgets[k] / scale, excess(f.cost[1][k], bottom), marker=s.marker, color=s.colour,
                         linestyle="none", markersize=9 if s.marker == "*" else 6, markerfacecolor=s.face,
-                        markeredgecolor=s.edge, markeredgewidth=0.5 if s.edge == "white" else 1.2,
+                        markeredgecolor=s.edge, markeredgewidth=s.edge_width,
                         zorder=4 if f.label.startswith("LQR") or f.budgets.size == 1 else 3,
                         clip_on=bool(f.cost[1][k] - 1.0 > top * 1.25), gid=method_gid(f.label))
             if f.covered == 0:

@@ -76,6 +76,12 @@ class Style:
         solid = self.face == self.colour and MarkerStyle(self.marker).is_filled()
         return "white" if solid else self.colour
 
+    @property
+    def edge_width(self) -> float:
+        """Marker edge width in points: a thin white ring around a solid marker, else a line
+        heavy enough to draw a hollow or edge-only marker."""
+        return 0.6 if self.edge == "white" else 1.2
+
     # A Style unpacks as (colour, marker), as the figures' older label -> (colour, marker) tables did.
     def __iter__(self):
         return iter((self.colour, self.marker))

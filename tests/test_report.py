@@ -300,3 +300,34 @@ def test_every_built_in_marker_is_visible_on_white():
         visible = style.edge == style.colour or (MarkerStyle(marker).is_filled() and style.face == colour)
         assert visible, key
     assert Style(*METHOD_STYLES["autonomous"]).edge == METHOD_STYLES["autonomous"][0]
+
+
+def test_both_cost_figures_draw_a_method_s_marker_edge_alike():
+    """The cost-against-links figure and the budget fronts take a marker's edge colour and width from
+    its one Style (they used to decide the width each on their own: 0.6 and 0.5 points)."""
+    from matplotlib.lines import Line2D
+
+    from compare.figures import plot_budget_fronts
+    from compare.records import Records
+    from compare.report import budget_fronts, label_styles
+    from compare.styles import style_for
+
+    records = []
+    for method, links in (("sparse_admm", (20, 40)), ("autonomous", (0,)), ("lqr", (56,))):
+        for inst in INST:
+            records += [_rec(inst, method, k, 1.5 - k / 100, params={"gamma": k}) for k in links]
+    records = Records.from_rows(records)
+    styles = label_styles(records)
+    drawn = {}
+    for fig in (plot_cost_vs_links(aggregate(records), records=records, styles=styles)[0],
+                plot_budget_fronts(budget_fronts(records), styles=styles)[0]):
+        for ax in fig.axes:
+            for line in ax.lines:
+                gid = line.get_gid() or ""
+                if isinstance(line, Line2D) and gid.startswith("method:") and line.get_marker() not in ("None", "", None):
+                    drawn.setdefault(gid[7:], set()).add((line.get_markeredgecolor(), line.get_markeredgewidth()))
+    assert set(drawn) == {"sparse_admm", "autonomous", "lqr"}
+    for label, edges in drawn.items():
+        style = style_for(label)
+        assert edges == {(style.edge, style.edge_width)}, (label, edges)
+    assert {style_for(label).edge_width for label in drawn} == {0.6, 1.2}  # solid and edge-only markers both drawn

@@ -23,9 +23,9 @@ import time
 for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # one thread, as the harness's workers
     os.environ.setdefault(_name, "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from codesign import GRNNController, paper_instance, simulate, validation_set  # noqa: E402
+from codesign import GRNNController, paper_instance, simulate, validation_set
 
 
 class StepByStep:
@@ -70,10 +70,12 @@ def main():
         np.put_along_axis(sparse, np.argsort(-np.abs(sparse), axis=1)[:, 2:], 0.0, axis=1)
         for name, S in (("complete", dense), ("plant graph", plant), ("2 per node", sparse)):
             c = GRNNController(S, F, W, G)
-            loop = best_seconds(lambda: simulate(inst, StepByStep(c), x, control_variates=False), args.repeats)
-            fast = best_seconds(lambda: simulate(inst, c, x, control_variates=False), args.repeats)
-            a = simulate(inst, c, x, control_variates=False).costs
-            b = simulate(inst, StepByStep(c), x, control_variates=False).costs
+            def rollout(controller, inst=inst, x=x):
+                return simulate(inst, controller, x, control_variates=False).costs
+
+            loop = best_seconds(lambda c=c: rollout(StepByStep(c)), args.repeats)
+            fast = best_seconds(lambda c=c: rollout(c), args.repeats)
+            a, b = rollout(c), rollout(StepByStep(c))
             print(f"{n:>4} {name:>14} {loop:>12.4f} {fast:>11.4f} {loop / fast:>5.2f}x "
                   f"{np.max(np.abs(a - b) / np.abs(b)):>13.1e}")
 

@@ -68,9 +68,12 @@ _PROPOSAL_SALT = 0x715E
 _PILOT_SALT = 0x9170
 # Amplitude of the initial states whose responses give a controller's linearization (local_cost_form).
 _LOCAL_SCALE = 1e-4
-# Draws simulated at once while refining: 2000 keeps a GCNN's (32 features x draws x nodes) activations
-# in cache, 1.41x faster over a refined design's evaluation than 8000 (14.6 -> 10.3 s at ||A|| = 1.2).
-_ROLLOUT_CHUNK = 2000
+# The step loop rolls noiseless draws out this many states (draws x nodes) at a time: a block's
+# activations (a GCNN's 32 features per state) then stay in a core's cache. Beside another worker,
+# a GCNN stepping 2000 draws at once ran at a sixth of its speed alone and slowed that worker 1.9x;
+# in blocks of 4000 states neither slows, at 20 nodes or 100 (benchmarks/bench_rollout_blocks.py;
+# 8000 states or more fall off the same cliff).
+_BLOCK_STATES = 4000
 # The most recent draws a proposal's cost form is fitted on.
 _REFIT_DRAWS = 16000
 
@@ -627,6 +630,14 @@ def simulate(
     cost_form : ndarray (n, n), optional
         A quadratic form fixed before the draws (:func:`local_cost_form`) that
         joins the control variates' features.
+
+    Notes
+    -----
+    A controller with ``rollout(instance, x0, steps)`` may roll a noiseless batch
+    out in one pass (:mod:`codesign.controllers`). Otherwise noiseless draws are
+    stepped a block at a time (4000 states per block: 200 draws at 20 nodes,
+    40 at 100), so a controller's activations stay in cache, and a block that leaves
+    ``bound`` stops on its own; with noise, the whole batch steps together.
     """
     if control_variates is None:
         control_variates = x0 is None
@@ -641,13 +652,14 @@ def simulate(
     compiled = getattr(controller, "rollout", None)
     # A controller may roll a noiseless batch out in one compiled pass (the GRNN's): taken only
     # while every state stays within the bound, where it computes what the step loop would.
-    result = compiled(instance, x, steps) if compiled is not None and rng is None and instance.n <= STRUCTURED_ABOVE \
-        else None
+    result = compiled(instance, x, steps) if compiled is not None and rng is None else None
     if result is not None and np.all(result[1] <= bound) and np.all(np.isfinite(result[0])):
         costs, bounded = result[0], True
         max_state = float(max([max_state, *result[1]]))
-    else:
+    elif rng is not None:  # one noise draw per step for the whole batch, so not in blocks
         costs, bounded, max_state = _step_loop(instance, controller, x, steps, noise_std, rng, bound, max_state)
+    else:
+        costs, bounded, max_state = _step_loop_in_blocks(instance, controller, x, steps, bound, max_state)
     costs = costs / instance.trace_P
     if not bounded or not np.all(np.isfinite(costs)):
         inf = float("inf")
@@ -684,6 +696,19 @@ def _step_loop(instance, controller, x, steps, noise_std, rng, bound, max_state)
     return costs, bounded, max_state
 
 
+def _step_loop_in_blocks(instance, controller, x, steps, bound, max_state):
+    """:func:`_step_loop` (noiseless) over blocks of draws sized to stay in cache; each block stops
+    on its own when it leaves ``bound``."""
+    size = max(1, _BLOCK_STATES // instance.n)
+    costs, bounded = np.empty(x.shape[0]), True
+    for start in range(0, x.shape[0], size):
+        block = slice(start, start + size)
+        costs[block], block_bounded, max_state = _step_loop(instance, controller, x[block], steps, 0.0, None,
+                                                            bound, max_state)
+        bounded = bounded and block_bounded
+    return costs, bounded, max_state
+
+
 def _pooled(batches: list[tuple[int, float, float]]) -> tuple[float, float]:
     """Draw-count-weighted mean of independent batch estimates ``(draws, estimate, stderr)``.
 
@@ -695,14 +720,6 @@ def _pooled(batches: list[tuple[int, float, float]]) -> tuple[float, float]:
     share = draws / draws.sum()
     return (float(share @ np.array([b[1] for b in batches])),
             float(np.sqrt(np.sum((share * np.array([b[2] for b in batches]))**2))))
-
-
-def _rollout_in_chunks(instance, controller, x, chunk: int = _ROLLOUT_CHUNK) -> Rollout:
-    """Plain rollout of many draws, a bounded number at a time (a controller's state grows with the batch)."""
-    parts = [simulate(instance, controller, x[i:i + chunk], control_variates=False) for i in range(0, x.shape[0], chunk)]
-    bounded = all(part.bounded for part in parts)
-    costs = np.concatenate([part.costs for part in parts])
-    return Rollout(float("nan"), float("nan"), costs, bounded, max(part.max_state for part in parts), parts[0].steps)
 
 
 def local_cost_form(instance, controller, scale: float = _LOCAL_SCALE) -> np.ndarray | None:
@@ -848,7 +865,7 @@ def _refine(instance, controller, first: Rollout, x0, record: PrecisionRecord) -
         recent_x, recent_costs = np.vstack(draws)[-_REFIT_DRAWS:], np.concatenate(costs)[-_REFIT_DRAWS:]
         proposal = TiltedProposal.along(fitted_cost_form(instance, recent_x, recent_costs))
         x = proposal.draw(instance, count, (_PROPOSAL_SALT, batch))
-        more = _rollout_in_chunks(instance, controller, x)
+        more = simulate(instance, controller, x, control_variates=False)
         if not more.bounded:
             return _unbounded(
                 rollout, f"an importance-sampled draw of refinement batch {batch + 1} (draws {total + 1}-"

@@ -6,9 +6,8 @@ Prints, measured in one run on one thread:
   ``--draws`` initial states with the controller's step (feature-major filter bank, tanh as a
   folded sigmoid) and with the node-major step it replaced (``(batch N, K) x (K, F)`` products
   and ``torch.tanh``), their largest difference in the inputs, and the ratio;
-* seconds for the same draws through the refinement's chunked rollout
-  (``codesign.evaluation._rollout_in_chunks``) in chunks of 8000 draws (before 2026-11-26) and
-  of the current ``_ROLLOUT_CHUNK``, whose activations stay in cache;
+* seconds for the same draws through ``simulate``, which steps them in cache-sized blocks
+  (``benchmarks/bench_rollout_blocks.py`` measures what the blocks are worth beside another worker);
 * seconds per 750-step model of the trainer's GCNN stack (float32 and float64, 10 models),
   with the torch path and the fused (numba) engine, and their ratio.
 
@@ -24,7 +23,7 @@ import numpy as np
 import torch
 
 from codesign import paper_instance
-from codesign.evaluation import _ROLLOUT_CHUNK, _rollout_in_chunks
+from codesign.evaluation import _BLOCK_STATES, simulate
 from codesign.learned import GCNNController
 from codesign.learned.gcnn import _member, _parse
 from codesign.learned.gcnn_bptt import GCNNStack
@@ -70,15 +69,11 @@ def main():
         print(f"  {name:32s} {seconds:7.2f} s")
     old, new = times.values()
     print(f"  ratio {old / new:.2f}x; largest difference in u {diff:.1e}")
-    chunked = {}
-    for chunk in (8000, _ROLLOUT_CHUNK):
-        t = time.perf_counter()
-        costs = _rollout_in_chunks(inst, c, x0, chunk=chunk).costs
-        chunked[chunk] = (time.perf_counter() - t, costs)
-    (old, old_costs), (new, new_costs) = chunked.values()
-    print(f"  refinement rollout in chunks of 8000 {old:7.2f} s, of {_ROLLOUT_CHUNK} {new:7.2f} s: ratio "
-          f"{old / new:.2f}x; largest relative difference in the costs "
-          f"{np.max(np.abs(new_costs - old_costs) / old_costs):.1e}")
+    t = time.perf_counter()
+    simulate(inst, c, x0, control_variates=False)
+    seconds = time.perf_counter() - t
+    print(f"  through simulate, in blocks of {_BLOCK_STATES // inst.n} draws {seconds:7.2f} s: ratio "
+          f"{new / seconds:.2f}x over all draws at once (the feature-major row above)")
     print("GCNN training (10 models stacked, one thread), seconds per 750-step model:")
     insts = [paper_instance(s, n=20, a_norm=1.05) for s in range(10)]
     for dtype in ("float32", "float64"):

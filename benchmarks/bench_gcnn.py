@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from codesign import paper_instance
-from codesign.evaluation import _BLOCK_STATES, simulate
+from codesign.evaluation import _BLOCK_STATES, ROLLOUT_BOUND, _step_loop, simulate
 from codesign.learned import GCNNController
 from codesign.learned.gcnn import _member, _parse
 from codesign.learned.gcnn_bptt import GCNNStack
@@ -69,11 +69,15 @@ def main():
         print(f"  {name:32s} {seconds:7.2f} s")
     old, new = times.values()
     print(f"  ratio {old / new:.2f}x; largest difference in u {diff:.1e}")
-    t = time.perf_counter()
-    simulate(inst, c, x0, control_variates=False)
-    seconds = time.perf_counter() - t
-    print(f"  through simulate, in blocks of {_BLOCK_STATES // inst.n} draws {seconds:7.2f} s: ratio "
-          f"{new / seconds:.2f}x over all draws at once (the feature-major row above)")
+    seconds = {}
+    for name, run in (("all at once", lambda: _step_loop(inst, c, x0, inst.horizon, 0.0, None, ROLLOUT_BOUND, 0.0)),
+                      ("blocks", lambda: simulate(inst, c, x0, control_variates=False))):
+        t = time.perf_counter()
+        run()
+        seconds[name] = time.perf_counter() - t
+    print(f"  simulate's step loop, all draws at once {seconds['all at once']:7.2f} s, in blocks of "
+          f"{_BLOCK_STATES // inst.n} draws {seconds['blocks']:7.2f} s: ratio "
+          f"{seconds['all at once'] / seconds['blocks']:.2f}x")
     print("GCNN training (10 models stacked, one thread), seconds per 750-step model:")
     insts = [paper_instance(s, n=20, a_norm=1.05) for s in range(10)]
     for dtype in ("float32", "float64"):

@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from codesign import paper_instance, simulate, validation_set
-from codesign import evaluation
+from codesign import evaluation, paper_instance, simulate, validation_set
 from codesign.evaluation import ROLLOUT_BOUND, _step_loop
 from codesign.learned import GCNNController
 

@@ -488,6 +488,10 @@ def canonical_eigh(M: np.ndarray, *, rng: np.random.Generator | None = None,
 
 #: Salt of the stream that rotates degenerate eigenspaces, apart from the instance's own stream.
 _BASIS_SALT = 0xBA515
+#: Draws of positions :func:`paper_instance` tries before it gives up on ``connect="redraw"``.
+#: At 500 nodes 1 draw in 34 is connected, so 1000 fail together with probability 1e-13;
+#: at 1000 nodes none was in thousands.
+MAX_REDRAWS = 1000
 
 
 def paper_instance(
@@ -525,8 +529,9 @@ def paper_instance(
         link per gap; on a line the components are runs of consecutive positions).
         Past a few hundred nodes the kNN graph on [0, 1) is almost never connected
         (6 neighbours: 1 draw in 34 at N = 500, none in thousands at N = 1000), so
-        redrawing does not end there; the instance's spec records ``connect`` only
-        when it is ``"bridge"``.
+        redrawing does not end there: after :data:`MAX_REDRAWS` draws an
+        :class:`InstanceError` says to bridge. The instance's spec records
+        ``connect`` only when it is ``"bridge"``.
     """
     for label, value, low in (("n", n, 2), ("degree", degree, 2), ("hops", hops, 0), ("horizon", horizon, 1)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
@@ -540,17 +545,22 @@ def paper_instance(
         raise InstanceError(f"seed must be a non-negative integer, got {seed!r}")
     if connect not in CONNECT_RULES:
         raise InstanceError(f"connect must be one of {', '.join(CONNECT_RULES)}, got {connect!r}")
-    import networkx as nx
+    from scipy.sparse.csgraph import connected_components
 
     rng = np.random.default_rng(int(seed))
-    while True:
+    for _ in range(MAX_REDRAWS):
         positions = rng.uniform(0.0, 1.0, n)
         comm = _knn_graph(positions, degree)
         if connect == "bridge":
             _bridge_gaps(comm, positions)
             break
-        if nx.is_connected(nx.from_numpy_array(comm)):
+        # scipy's components, not networkx's: building a networkx graph from the dense
+        # adjacency takes most of a draw at 1000 nodes, and the test runs every draw.
+        if connected_components(comm, directed=False, return_labels=False) == 1:
             break
+    else:
+        raise InstanceError(f"no connected {degree}-nearest-neighbour graph on {n} nodes in {MAX_REDRAWS} draws "
+                            f"(seed {seed}); pass connect='bridge' to link the gaps of the first draw instead")
     gso = comm / np.linalg.norm(comm, 2)
     _, V = canonical_eigh(gso, rng=np.random.default_rng([int(seed), _BASIS_SALT]))
     a = rng.standard_normal(n)

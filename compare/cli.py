@@ -20,16 +20,16 @@ __all__ = ["main"]
 #: Approximate wall time of ``compare run PRESET`` on 2 cores (2 workers), report included.
 #: A preset missing here is listed as "not measured".
 PRESET_TIMES = {
-    "quick": "~1 min (51-64 s measured, 56 s on 2026-11-27; 67-78 s the first time, compiling the fused kernels)",
+    "quick": "~1 min (51-64 s measured, 56-57 s on 2026-11-27; 67-78 s the first time, compiling the fused kernels)",
     "baselines-small": "~20 s (16 s measured)",
     "sls-small": "~15 s (15 s measured)",
     "table1-small": "~40 s (38 s measured)",
-    "table1": "~5 min (275-320 s measured, 275 s on 2026-11-27)",
-    "tradeoff": "~21 min (1261 s measured on 2026-11-27; 1363-1466 s before)",
-    "systems": "~3 min (172-215 s measured)",
-    "scale": "~17-19 min (1023-1154 s measured, 1028 s on 2026-11-27)",
-    "small": "~7-11 min (420-670 s measured, 536 s on 2026-11-27)",
-    "benchmark-systems": "~6-7 min (349-416 s measured, 378 s on 2026-11-27)",
+    "table1": "~5 min (275-320 s measured, 275 s and 294 s on 2026-11-27)",
+    "tradeoff": "~21 min (1261 s and 1279 s measured on 2026-11-27; 1363-1466 s before)",
+    "systems": "~3 min (172-215 s measured, 173 s on 2026-11-27)",
+    "scale": "~17-19 min (1023-1154 s measured, 1028 s and 1066 s on 2026-11-27)",
+    "small": "~7-11 min (420-670 s measured, 536 s and 555 s on 2026-11-27)",
+    "benchmark-systems": "~6-7 min (349-416 s measured, 377-378 s on 2026-11-27)",
     "scale-large": "~63 min (3806 s measured)",
 }
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .figures import (OFF_SCALE, _y_limits, draw_boundary, shared_y, excess, excess_axis, finish_legend, legend_handles,
+from .figures import (OFF_SCALE, _y_limits, boundary_handles, draw_boundary, shared_y, excess, excess_axis, finish_legend, legend_handles,
                       links_axis, method_gid, panel_figure, panel_heading)
 from .records import as_records
 from .styles import Style
@@ -232,16 +232,17 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
         links_axis(ax, right, per_node=per_node)
         # On the axis's own top edge: where every shown cost is within 0.8 % of LQR's, top * 1.3 lies
         # below it (or at or below 0, far off a log axis, which blew a figure up to 390,000 px).
-        rows = _mark_off_scale(ax, off_scale, ax.get_ylim()[1]) if off_scale else 0
+        if off_scale:
+            _mark_off_scale(ax, off_scale, ax.get_ylim()[1])
         ax.set_xlabel("directed off-diagonal links per node (median)" if per_node
                       else "directed off-diagonal links (median)")
         ax.set_ylabel("excess cost over LQR")
         ax.set_title(panel_heading(panel, (instances or {}).get(panel)), fontsize=10)
         if boundaries and panel in boundaries and any(p.info_model == "delayed" for p in usable):
-            draw_boundary(ax, boundaries[panel] / scale, below=9.0 * rows)
+            draw_boundary(ax, boundaries[panel] / scale)
         ax.grid(True, which="major", alpha=0.3)
     if own:
-        finish_legend(fig, legend_handles(styles, labels),
+        finish_legend(fig, legend_handles(styles, labels) + boundary_handles(axes.values()),
                       title="marker: median over instances\nfaint: every instance's design")
     return fig, axes
 

@@ -25,7 +25,7 @@ from .statistics import panel_title  # noqa: E402
 from .styles import BOUND_COLOUR, INFO_MODELS, INFO_ORDER, Style, label_styles  # noqa: E402
 
 __all__ = ["LINESTYLES", "OFF_SCALE", "FLOOR", "excess", "excess_axis", "panel_grid", "panel_heading",
-           "legend_handles", "finish_legend", "draw_boundary", "plot_budget_fronts", "label_styles", "method_gid",
+           "legend_handles", "finish_legend", "draw_boundary", "boundary_handles", "plot_budget_fronts", "label_styles", "method_gid",
            "drawn_styles", "axis_floor", "panel_figure"]
 
 #: Line style and description per information model (from :data:`compare.styles.INFO_MODELS`).
@@ -178,16 +178,29 @@ def finish_legend(fig, handles, *, title: str | None = None) -> None:
             text.set_fontweight("bold")
 
 
-def draw_boundary(ax, x: float, *, below: float = 0.0) -> None:
+#: How the QI boundary is drawn, on the panels and in the legend.
+BOUNDARY_STYLE = {"color": "0.35", "linestyle": (0, (1, 2)), "linewidth": 1.0}
+BOUNDARY_LABEL = "QI boundary (plant-graph links)"
+BOUNDARY_GID = "qi-boundary"
+
+
+def draw_boundary(ax, x: float):
     """The plant graph's link count: below it no delayed graph is quadratically invariant.
 
-    The label starts ``below`` points under the top edge (clear of off-scale labels there).
+    A dotted line under the markers (SLS on the plant graph sits on it), named in the
+    legend (:func:`boundary_handle`): a name on the panel was covered by the markers
+    that crowd that link count. Returns the line.
     """
-    ax.axvline(x, color="0.35", linestyle=(0, (1, 2)), linewidth=1.0, zorder=0)
-    ax.annotate(" QI boundary ", (x, 1.0), xycoords=ax.get_xaxis_transform(),
-                xytext=(-1, -4 - below), textcoords="offset points", rotation=90, ha="right", va="top",
-                fontsize=7, color="0.35", zorder=1,  # under the markers: SLS on the plant graph sits on this line
-                bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1})
+    return ax.axvline(x, zorder=0, gid=BOUNDARY_GID, **BOUNDARY_STYLE)
+
+
+def boundary_handles(axes) -> list:
+    """The legend entry naming :func:`draw_boundary`'s line, if one of ``axes`` (Axes objects) has it."""
+    if any(line.get_gid() == BOUNDARY_GID for ax in axes for line in ax.lines):
+        # under a heading of its own, so that it is not read as one of the last model's methods
+        return [Line2D([], [], linestyle="none", label="for delayed designs:"),
+                Line2D([], [], label=BOUNDARY_LABEL, **BOUNDARY_STYLE)]
+    return []
 
 
 def links_axis(ax, right: float, *, per_node: bool = False) -> None:
@@ -286,6 +299,6 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
             draw_boundary(ax, boundaries[panel] / scale)
         ax.grid(True, which="major", alpha=0.3)
     if own:
-        finish_legend(fig, legend_handles(styles, labels),
+        finish_legend(fig, legend_handles(styles, labels) + boundary_handles(axes.values()),
                       title="median over instances; band 25–75 %")
     return fig, axes

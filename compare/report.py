@@ -264,10 +264,10 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
               "cost, among the settings whose summary point some design reaches (as drawn).", ""]
     lines += _pareto_tables(points)
     if boundaries:
-        lines += ["The dotted vertical line in the figures is the median number of off-diagonal plant-graph "
-                  "links: below it no communication graph relaying one hop per step is quadratically "
-                  "invariant on this family, so no convex delay-constrained design with the GRNN's "
-                  "information model exists there (docs/information-models.md).", ""]
+        lines += ["The dotted vertical line in the figures (\"QI boundary\" in their legends) is the median "
+                  "number of off-diagonal plant-graph links: below it no communication graph relaying one "
+                  "hop per step is quadratically invariant on this family, so no convex delay-constrained "
+                  "design with the GRNN's information model exists there (docs/information-models.md).", ""]
     learning, supports = learning_sections(records, save, styles, load_controller, meta, members)
     lines += learning
     _, timed = experiments_with("compute", records, meta, members)

@@ -169,6 +169,17 @@ def test_redraw_is_the_default_and_stays_out_of_the_spec():
         paper_instance(0, connect="glue")
 
 
+def test_redrawing_gives_up_with_an_error_that_names_the_bridge(monkeypatch):
+    import codesign.instances as instances
+
+    # 6 neighbours on 1000 nodes: no draw in thousands is connected, and redrawing used to run forever
+    monkeypatch.setattr(instances, "MAX_REDRAWS", 3)
+    with pytest.raises(InstanceError, match=r"no connected 6-nearest-neighbour graph on 1000 nodes in 3 draws "
+                                            r"\(seed 4\); pass connect='bridge'"):
+        paper_instance(4, n=1000)
+    assert paper_instance(4, n=1000, connect="bridge").n == 1000
+
+
 def test_large_instances_use_the_doubling_dare_and_it_agrees_with_scipy(monkeypatch):
     import scipy.linalg
 

@@ -242,11 +242,22 @@ def test_off_scale_values_get_one_label_per_value_and_neighbours_go_a_row_lower(
     # At the axes' edges a label extends inwards instead of past the frame.
     assert texts["5"].get_ha() == "right" and texts["2.3"].get_ha() == "left" and texts["3"].get_ha() == "center"
 
-    from compare.figures import draw_boundary
+    plt.close(fig)
 
-    draw_boundary(ax, 300, below=9.0 * rows)  # its label starts under the off-scale labels
-    boundary = next(t for t in ax.texts if "QI boundary" in t.get_text())
-    assert boundary.xyann[1] < min(t.xyann[1] for t in texts.values()) - 7
+
+def test_the_qi_boundary_is_named_in_the_legend_not_under_the_markers():
+    import matplotlib.pyplot as plt
+
+    from compare.figures import BOUNDARY_LABEL, boundary_handles, draw_boundary
+
+    fig, (left, right) = plt.subplots(1, 2)
+    assert boundary_handles([left, right]) == []  # no boundary drawn: no entry
+    line = draw_boundary(right, 300)
+    assert list(line.get_xdata()) == [300, 300] and line.get_zorder() < 1
+    assert not right.texts  # a name on the panel was covered by the markers at that link count
+    heading, entry = boundary_handles([left, right])
+    assert heading.get_linestyle() == "None"  # a bold heading in finish_legend
+    assert entry.get_label() == BOUNDARY_LABEL and entry.get_linestyle() == line.get_linestyle()
     plt.close(fig)
 
 

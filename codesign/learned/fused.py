@@ -140,6 +140,29 @@ def _feature_mix(out, Z, W, transpose, N, h, B, zero):
 
 
 @_helper
+def _add_input(Z, X, F, N, h, B):
+    """Z[i, (l, b)] += F[l] X[i, b]: each node's own signal into its h features."""
+    for i in range(N):
+        zi, xi = Z[i], X[i]
+        for l in range(h):
+            f = F[l]
+            for b in range(B):
+                zi[l * B + b] += xi[b] * f
+
+
+@_helper
+def _readout(U, Z, G, N, h, B, zero):
+    """U[i, b] = sum_l G[l] Z[i, (l, b)]: each node's input from its h features."""
+    for i in range(N):
+        zi, ui = Z[i], U[i]
+        for b in range(B):
+            acc = zero
+            for l in range(h):
+                acc += G[l] * zi[l * B + b]
+            ui[b] = acc
+
+
+@_helper
 def _sparse_rows(out, inp, ptr, cols, vals, zero):
     """out[i] = sum_e vals[e] inp[cols[e]] over row i's entries, four at a time (padded)."""
     C = out.shape[1]
@@ -271,23 +294,12 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
                         _sparse_rows(Z, Y, s_ptr[m], s_cols[m], s_vals, ZERO)
                 else:
                     Z[:] = ZERO
-                for i in range(N):
-                    zi, xi = Z[i], xu[i]
-                    for l in range(h):
-                        f = Fm[l]
-                        for b in range(B):
-                            zi[l * B + b] += xi[b] * f
+                _add_input(Z, xu, Fm, N, h, B)
                 if squash and WIDE:
                     _tanh64(Z.reshape(N * HB), COEF, CONSTS)
                 elif squash:
                     _tanh32(Z.reshape(N * HB), COEF, CONSTS)
-                for i in range(N):
-                    zi, ui = Z[i], xu[N + i]
-                    for b in range(B):
-                        acc = ZERO
-                        for l in range(h):
-                            acc += Gm[l] * zi[l * B + b]
-                        ui[b] = acc
+                _readout(xu[N:], Z, Gm, N, h, B, ZERO)
                 _sparse_rows(XU[t + 1, :N], xu, ab_ptr[m], ab_cols[m], ab_vals[m], ZERO)
                 x, u = xu[:N], xu[N:]
                 if q_identity and r_identity:  # one flat pass over x(t) and u(t)

@@ -19,7 +19,8 @@ import functools
 
 import numpy as np
 
-from .fused import _dense_mix, _feature_mix, _padded_rows, _sparse_rows, _tanh64, _tanh_constants, kernel_jit
+from .fused import (_add_input, _dense_mix, _feature_mix, _padded_rows, _readout, _sparse_rows, _tanh64,
+                    _tanh_constants, kernel_jit)
 
 __all__ = ["BLOCK", "rollout_costs"]
 
@@ -56,21 +57,10 @@ def _kernel(h: int, squash: bool, q_identity: bool, r_identity: bool):
             for t in range(T):
                 _feature_mix(Y, Zp, W, False, N, h, BLOCK, zero)  # Y_j = W' Z_j(t - 1)
                 _sparse_rows(Z, Y, s_ptr, s_cols, s_vals, zero)  # Z_i = sum_j S_ij Y_j
-                for i in range(N):
-                    zi, xi = Z[i], XU[i]
-                    for l in range(h):
-                        f = F[l]
-                        for b in range(BLOCK):
-                            zi[l * BLOCK + b] += xi[b] * f
+                _add_input(Z, XU, F, N, h, BLOCK)
                 if squash:
                     _tanh64(Z.reshape(N * width), coef, consts)
-                for i in range(N):
-                    zi, ui = Z[i], XU[N + i]
-                    for b in range(BLOCK):
-                        total = zero
-                        for l in range(h):
-                            total += G[l] * zi[l * BLOCK + b]
-                        ui[b] = total
+                _readout(XU[N:], Z, G, N, h, BLOCK, zero)
                 x, u = XU[:N], XU[N:]
                 if not q_identity:
                     _dense_mix(tmp, Q, x, False, N, zero)

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .figures import (OFF_SCALE, _y_limits, boundary_handles, draw_boundary, shared_y, excess, excess_axis, finish_legend, legend_handles,
-                      links_axis, method_gid, panel_figure, panel_heading)
+from .figures import (OFF_SCALE, _y_limits, boundary_handles, draw_boundary, shared_y, excess, excess_axis,
+                      finish_legend, legend_handles, links_axis, method_gid, panel_figure, panel_heading)
 from .records import as_records
 from .styles import Style
 

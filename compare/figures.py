@@ -25,8 +25,8 @@ from .statistics import panel_title  # noqa: E402
 from .styles import BOUND_COLOUR, INFO_MODELS, INFO_ORDER, Style, label_styles  # noqa: E402
 
 __all__ = ["LINESTYLES", "OFF_SCALE", "FLOOR", "excess", "excess_axis", "panel_grid", "panel_heading",
-           "legend_handles", "finish_legend", "draw_boundary", "boundary_handles", "plot_budget_fronts", "label_styles", "method_gid",
-           "drawn_styles", "axis_floor", "panel_figure"]
+           "legend_handles", "finish_legend", "draw_boundary", "boundary_handles", "plot_budget_fronts",
+           "label_styles", "method_gid", "drawn_styles", "axis_floor", "panel_figure"]
 
 #: Line style and description per information model (from :data:`compare.styles.INFO_MODELS`).
 LINESTYLES = {info: (style, text) for info, (style, _, text) in INFO_MODELS.items()}
@@ -188,7 +188,7 @@ def draw_boundary(ax, x: float):
     """The plant graph's link count: below it no delayed graph is quadratically invariant.
 
     A dotted line under the markers (SLS on the plant graph sits on it), named in the
-    legend (:func:`boundary_handle`): a name on the panel was covered by the markers
+    legend (:func:`boundary_handles`): a name on the panel was covered by the markers
     that crowd that link count. Returns the line.
     """
     return ax.axvline(x, zorder=0, gid=BOUNDARY_GID, **BOUNDARY_STYLE)

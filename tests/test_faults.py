@@ -35,7 +35,8 @@ horizon = 10
 """
 
 
-def _spec(path: Path, methods: list[str], *, name: str = "faults", extra: str = "", timeouts: dict | None = None) -> Path:
+def _spec(path: Path, methods: list[str], *, name: str = "faults", extra: str = "",
+          timeouts: dict | None = None) -> Path:
     timeouts = timeouts or {}
     entries = "".join(f'\n[[methods]]\nmethod = "{m}"\n' + (f"timeout = {timeouts[m]}\n" if m in timeouts else "")
                       for m in methods)

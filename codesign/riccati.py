@@ -16,8 +16,13 @@ triangular solves and matrix products:
   ``check=True`` the returned P is certified: small residual and a closed loop
   ``A + BK`` whose repeated squares fall below norm 1/2 (so its spectral radius is
   below 1). The doubling follows the Riccati difference equation, so a mode that a
-  singular Q does not see is left uncontrolled; there Newton-Kleinman from the
-  stabilizing gain of ``Q + cI`` finds the stabilizing solution.
+  singular Q does not see is left uncontrolled (or its dual iterate overflows to NaN);
+  wherever the doubling fails (diverges, does not converge, is not stabilizing or
+  keeps a large residual) and Q is not numerically definite (smallest eigenvalue at
+  most 1e-8 times the largest: a rank-revealing test, run only then), Newton-Kleinman
+  from the stabilizing gain of ``Q + cI`` finds the stabilizing solution. The error
+  then means that none exists: (A, B) is not stabilizable, or a mode that Q does not
+  see lies on the unit circle (with a singular Q, within about 1e-6 of it).
 - :func:`solve_discrete_lyapunov`: ``X = A X A' + Q`` (or ``X = A'XA + Q`` with
   ``transpose=True``) by Smith's squared iteration (6 n^3 flops a doubling), whose
   convergence also certifies that A is stable. The rule: Smith first (about 2.6
@@ -67,6 +72,8 @@ _SDA_OVERFLOW = 1e150    # ||H_k||_F beyond this: the doubling diverges
 _REFINE_RTOL = 1e-14     # relative residual the Newton corrections aim for
 _MAX_REFINEMENTS = 3     # Newton corrections after the doubling (one is the rule, when any)
 _MAX_NEWTON = 50         # Newton-Kleinman steps from a stabilizing gain (semidefinite Q fallback)
+_DEFINITE_RTOL = 1e-8    # Q is numerically definite when lambda_min(Q) > 1e-8 lambda_max(Q)
+_MARGIN_SQUARINGS = 20   # with Q singular, a closed loop must halve within 2^20 steps: rho < 1 - 7e-7
 _ROUNDING_RTOL = 1e-10   # below this residual a Newton step that does not reduce it is rounding
 _CHECK_RTOL = 1e-8       # relative residual above which no solution is reported
 _CERTIFY_SQUARINGS = 40  # squarings of A_cl allowed: 2^40 eps keeps the rounding drift below 1e-3
@@ -88,7 +95,8 @@ class SolveInfo(NamedTuple):
         computed for the DARE; NaN for a Lyapunov solve with ``check=False``).
     method : str
         ``"sda"`` (doubling), ``"sda+newton"`` (Newton-Kleinman from the gain of
-        ``Q + cI``, for a mode that a singular Q does not see), ``"smith"`` or ``"schur"``.
+        ``Q + cI``, where the doubling failed on a numerically singular Q), ``"smith"``
+        or ``"schur"``.
     steps : int
         Doubling steps (SDA or Smith); 0 for the Schur method.
     refinements : int
@@ -209,13 +217,21 @@ def _defect(A, B, Q, R, P):
 
 
 def _sda_step(A, G, H, identity):
-    """One doubling step: (A_{k+1}, G_{k+1}, H_{k+1})."""
+    """One doubling step: (A_{k+1}, G_{k+1}, H_{k+1}), or None where W = I + G_k H_k is singular.
+
+    W is never singular while G_k and H_k are semidefinite; an exactly singular LU
+    factor means the iterates have overflowed (LAPACK's ``getrf`` is called directly,
+    as :func:`scipy.linalg.lu_factor` does, without its warning).
+    """
     import scipy.linalg
+    from scipy.linalg import lapack
 
     n = A.shape[0]
     W = identity + G @ H
-    lu = scipy.linalg.lu_factor(W, overwrite_a=True, check_finite=False)
-    solved = scipy.linalg.lu_solve(lu, np.hstack([A, G]), check_finite=False)
+    lu, piv, info = lapack.dgetrf(W, overwrite_a=True)
+    if info != 0:
+        return None
+    solved = scipy.linalg.lu_solve((lu, piv), np.hstack([A, G]), check_finite=False)
     WA, WG = solved[:, :n], solved[:, n:]
     return A @ WA, _sym(G + A @ WG @ A.T), _sym(H + A.T @ (H @ WA))
 
@@ -231,8 +247,12 @@ def _sda(A, G, H, max_steps: int):
     previous = np.inf
     for step in range(1, max_steps + 1):
         with np.errstate(over="ignore", invalid="ignore"):  # divergence is detected just below
-            A, G, H_next = _sda_step(A, G, H, identity)
-            size = np.linalg.norm(H_next)
+            stepped = _sda_step(A, G, H, identity)
+            if stepped is None:
+                size = np.inf
+            else:
+                A, G, H_next = stepped
+                size = np.linalg.norm(H_next)
         if not np.isfinite(size) or size > _SDA_OVERFLOW:
             raise NoStabilizingSolutionError(
                 f"no stabilizing solution: the doubling diverges (||H|| = {size:.3g} after {step} steps); "
@@ -252,13 +272,13 @@ def _sda(A, G, H, max_steps: int):
         "modes on the unit circle)")
 
 
-def _certify_stable(M: np.ndarray) -> None:
-    """Raise unless some ||M^(2^k)||_F, k <= 40, is below 1/2 (then rho(M) < 1).
+def _certify_stable(M: np.ndarray) -> int:
+    """Raise unless some ||M^(2^k)||_F, k <= 40, is below 1/2 (then rho(M) < 1); return that k.
 
     Squaring in floating point drifts by about 2^k eps, which can make the powers
     of a matrix with an eigenvalue on the unit circle decay after 50 squarings; 40
     squarings and the margin 1/2 keep the certificate honest. It accepts spectral
-    radii up to about 1 - 1e-11.
+    radii up to about 1 - 1e-11; k is about log2(0.69 / (1 - rho(M))).
     """
     size = np.linalg.norm(M)
     with np.errstate(over="ignore", invalid="ignore"):
@@ -267,7 +287,7 @@ def _certify_stable(M: np.ndarray) -> None:
                 M = M @ M
                 size = np.linalg.norm(M)
             if size < _CERTIFY_NORM:
-                return
+                return squarings
             if not np.isfinite(size) or size > _SMITH_GROWTH:
                 break
     raise NoStabilizingSolutionError(
@@ -280,12 +300,14 @@ def _newton(A, B, Q, R, state, max_steps: int, *, from_far: bool):
 
     Each step needs A_cl stable: :func:`solve_discrete_lyapunov` checks it (Smith's
     powers decay, or the Schur form's eigenvalues). Returns ``(state, steps,
-    certified)`` where ``certified`` says that the returned state's own closed
-    loop passed that check. ``from_far``: the start is a stabilizing gain far from
+    certified)`` where ``certified`` says whether the returned state's own closed
+    loop passed that check: ``""`` (not checked), ``"smith"`` (Smith's iteration
+    converged: spectral radius below about 1 - 3e-4) or ``"schur"`` (below 1, by the
+    Schur form's eigenvalues). ``from_far``: the start is a stabilizing gain far from
     the solution, where Newton's residual need not fall monotonically; otherwise
     a step that does not lower the residual ends the refinement (rounding level).
     """
-    certified = False
+    certified = ""
     ratios = []
     for step in range(max_steps):
         P, F, _, Acl, residual = state
@@ -299,19 +321,24 @@ def _newton(A, B, Q, R, state, max_steps: int, *, from_far: bool):
                     "on the unit circle (an unobservable mode of (Q, A) on the unit circle)")
             return state, step, certified
         try:
-            correction = solve_discrete_lyapunov(Acl, F, transpose=True, check=False)
+            correction, solved = solve_discrete_lyapunov(Acl, F, transpose=True, check=False, full_output=True)
         except NoStabilizingSolutionError:
+            if from_far and step == 0:
+                # The start is the optimal gain of a definite cost Q + cI: it stabilizes if any gain does.
+                raise NoStabilizingSolutionError(
+                    "no stabilizing solution: the optimal gain for the definite cost Q + cI does not "
+                    "stabilize; (A, B) is not stabilizable") from None
             if from_far:
                 raise NoStabilizingSolutionError(
                     "no stabilizing solution: Newton's closed loop reaches the unit circle "
                     "(an unobservable mode of (Q, A) on the unit circle)") from None
-            return state, step, False
+            return state, step, ""
         P_next = _sym(P + correction)
         trial = _defect(A, B, Q, R, P_next)
         if not trial[3] < residual and (residual <= _ROUNDING_RTOL or not from_far):
-            return state, step, True  # rounding level: keep the certified point
+            return state, step, solved.method  # rounding level: keep the certified point
         ratios.append(trial[3] / residual if residual > 0 else 0.0)
-        state, certified = (P_next,) + trial, False
+        state, certified = (P_next,) + trial, ""
     if from_far and state[4] > _CHECK_RTOL:
         raise NoStabilizingSolutionError(
             f"no stabilizing solution detected: Newton's iteration did not converge in {max_steps} steps "
@@ -319,14 +346,46 @@ def _newton(A, B, Q, R, state, max_steps: int, *, from_far: bool):
     return state, max_steps, certified
 
 
-def _positive_definite(Q: np.ndarray) -> bool:
-    import scipy.linalg
+def _numerically_definite(Q: np.ndarray) -> bool:
+    """Whether Q's smallest eigenvalue exceeds :data:`_DEFINITE_RTOL` (1e-8) times its largest.
 
-    try:
-        scipy.linalg.cholesky(Q, lower=True, check_finite=False)
-    except np.linalg.LinAlgError:
-        return False
-    return True
+    A rank-revealing test (symmetric eigenvalues; about 6 n x n products at n = 1000,
+    spent only once the doubling has failed). A Cholesky factorization is no such
+    test: it succeeds on a numerically singular Q = C'C, whose eigenvalues at rounding
+    level come out positive as often as not. Below the ratio 1e-8 a mode may be seen
+    by Q only through an eigenvalue that the doubling cannot resolve (its dual iterate
+    G_k grows along that mode like 1 / lambda_min(Q), and W = I + G_k H_k loses as
+    many digits), so the doubling's failure is no proof that no stabilizing solution exists.
+    """
+    eigenvalues = np.linalg.eigvalsh(Q)
+    return bool(eigenvalues[0] > _DEFINITE_RTOL * max(float(eigenvalues[-1]), 0.0))
+
+
+def _certified_state(A, B, Q, R, state, certified, singular):
+    """``state`` if its closed loop is stable and its residual at most 1e-8, else NoStabilizingSolutionError.
+
+    ``certified``: what :func:`_newton` already checked (``""``: nothing, then
+    :func:`_certify_stable` does). ``singular()``: whether Q is not numerically
+    definite; then a closed loop that needs more than :data:`_MARGIN_SQUARINGS` = 20
+    squarings to halve (spectral radius above about 1 - 7e-7) is refused: with a
+    singular Q a mode that Q does not see may sit on the unit circle, and rounding
+    moves such a closed-loop eigenvalue to 1 - 1e-8 or so (the pencil's double
+    eigenvalue splits by about sqrt(eps)), where it cannot be told from a stable one.
+    """
+    squarings = None if certified else _certify_stable(state[3])
+    if not state[4] <= _CHECK_RTOL:
+        raise NoStabilizingSolutionError(
+            f"no stabilizing solution detected: the relative residual stays at {state[4]:.3g}")
+    near = certified == "schur" if squarings is None else squarings > _MARGIN_SQUARINGS
+    if near and singular():
+        if squarings is None:
+            squarings = _certify_stable(state[3])
+        if squarings > _MARGIN_SQUARINGS:
+            raise NoStabilizingSolutionError(
+                f"no stabilizing solution detected: with a singular Q the closed loop's powers take "
+                f"2^{squarings} steps to halve (spectral radius within about 1e-6 of 1), which is "
+                "taken for an unobservable mode of (Q, A) on the unit circle")
+    return state
 
 
 def _from_detectable_problem(A, B, Q, R, G, max_steps):
@@ -336,14 +395,18 @@ def _from_detectable_problem(A, B, Q, R, G, max_steps):
     unobserved unstable mode uncontrolled (it costs nothing over any finite
     horizon); with Q + cI every mode is observed, so its solution's gain is
     stabilizing, and Newton-Kleinman from a stabilizing gain converges to the
-    stabilizing solution of the given Q wherever that exists.
+    stabilizing solution of the given Q wherever that exists (and, where an
+    unobserved mode sits on the unit circle, only linearly, which :func:`_newton`
+    reports). Q + cI is definite and well conditioned (c >= ||Q||_F / sqrt(n)), so
+    a divergence of its doubling means that (A, B) is not stabilizable. Returns
+    ``(state, steps, newton_steps)`` with a certified state.
     """
     n = A.shape[0]
     c = max(float(np.linalg.norm(Q)) / np.sqrt(n), 1.0)
     P_shifted, steps = _sda(A, G, Q + c * np.eye(n), max_steps)
     state = (P_shifted,) + _defect(A, B, Q, R, P_shifted)
     state, newton_steps, certified = _newton(A, B, Q, R, state, _MAX_NEWTON, from_far=True)
-    return state, steps, newton_steps, certified
+    return _certified_state(A, B, Q, R, state, certified, lambda: True), steps, newton_steps
 
 
 def solve_discrete_are(A, B, Q, R, *, check: bool = True, full_output: bool = False,
@@ -354,9 +417,14 @@ def solve_discrete_are(A, B, Q, R, *, check: bool = True, full_output: bool = Fa
     :func:`scipy.linalg.solve_discrete_are`) by the structure-preserving doubling
     algorithm, then Newton-Kleinman corrections ``D = A_cl' D A_cl + F(P)`` (solved
     by Smith's iteration on the stable closed loop) while the relative residual is
-    above 1e-14 and falling. When Q is singular and the doubling's closed loop is
-    not stable (a mode that Q does not see), Newton-Kleinman from the stabilizing
-    gain of ``Q + cI`` finds the stabilizing solution if there is one.
+    above 1e-14 and falling. Where the doubling fails (it diverges or overflows, does
+    not converge, or, with ``check``, its closed loop is not stable or its residual
+    stays above 1e-8) and Q is not numerically definite (its smallest eigenvalue is at
+    most 1e-8 times its largest; a Cholesky factorization succeeds on numerically
+    singular matrices and is no test), a mode that Q does not see may have been left
+    uncontrolled: Newton-Kleinman from the stabilizing gain of ``Q + cI`` finds the
+    stabilizing solution if there is one. Well-posed problems (the doubling succeeds)
+    never pay for the eigenvalues of that rank test.
 
     Parameters
     ----------
@@ -370,7 +438,8 @@ def solve_discrete_are(A, B, Q, R, *, check: bool = True, full_output: bool = Fa
         Verify the result: relative residual at most 1e-8 and a closed loop
         ``A + BK``, ``K = -(R + B'PB)^{-1} B'PA``, whose repeated squares fall below
         norm 1/2 (a certificate that its spectral radius is below 1). Costs about
-        one doubling step; without it only the doubling's convergence is checked.
+        one doubling step; without it only the doubling's convergence is checked
+        (where it fails on a singular Q, the fallback's result is certified all the same).
     full_output : bool
         Also return a :class:`SolveInfo`.
     max_steps : int
@@ -388,9 +457,13 @@ def solve_discrete_are(A, B, Q, R, *, check: bool = True, full_output: bool = Fa
     ValueError
         Shapes, non-finite entries, Q or R not symmetric, R not positive definite.
     NoStabilizingSolutionError
-        The doubling diverges or does not converge (no stabilizing solution: (A, B)
-        not stabilizable, or unit-circle eigenvalues), or, with ``check``, the
-        residual stays large or the closed loop is not stable.
+        No stabilizing solution: (A, B) is not stabilizable, or (Q, A) has an
+        unobservable mode on the unit circle. With a numerically definite Q this is
+        the doubling's verdict (it diverges or does not converge, or, with ``check``,
+        the residual stays large or the closed loop is not stable); with a singular Q
+        the fallback's (the gain of ``Q + cI`` does not stabilize; Newton converges
+        only linearly, or to a closed loop within about 1e-6 of the unit circle,
+        which to working precision is an unobserved mode on the circle).
     """
     import scipy.linalg
 
@@ -404,26 +477,28 @@ def solve_discrete_are(A, B, Q, R, *, check: bool = True, full_output: bool = Fa
     # G_0 = B R^{-1} B' as a Gram matrix, so that it is symmetric semidefinite to rounding.
     BL = scipy.linalg.solve_triangular(L, B.T, lower=True, check_finite=False).T
     G = BL @ BL.T
-    P, steps = _sda(A, G, Q.copy(), int(max_steps))
-    state = (P,) + _defect(A, B, Q, R, P)
-    state, refinements, certified = _newton(A, B, Q, R, state, _MAX_REFINEMENTS, from_far=False)
+    max_steps = int(max_steps)
     method = "sda"
-    if check and not certified:
-        try:
-            _certify_stable(state[3])
-            certified = True
-        except NoStabilizingSolutionError:
-            if _positive_definite(Q):
-                raise  # (Q, A) is observable, so the doubling found the stabilizing solution if any
-    if check and not certified:
-        state, steps, refinements, certified = _from_detectable_problem(A, B, Q, R, G, int(max_steps))
+    rank_test = []  # Q's rank test, done at most once and only where needed
+
+    def singular() -> bool:
+        if not rank_test:
+            rank_test.append(not _numerically_definite(Q))
+        return rank_test[0]
+
+    try:
+        P, steps = _sda(A, G, Q.copy(), max_steps)
+        state = (P,) + _defect(A, B, Q, R, P)
+        state, refinements, certified = _newton(A, B, Q, R, state, _MAX_REFINEMENTS, from_far=False)
+        if check:
+            state = _certified_state(A, B, Q, R, state, certified, singular)
+    except NoStabilizingSolutionError:
+        if not singular():
+            raise  # (Q, A) is observable, so the doubling found the stabilizing solution if any
+        # Q is singular to working precision: the doubling's failure proves nothing.
+        state, steps, refinements = _from_detectable_problem(A, B, Q, R, G, max_steps)
         method = "sda+newton"
-        if not certified:
-            _certify_stable(state[3])
     P, residual = state[0], state[4]
-    if check and not residual <= _CHECK_RTOL:
-        raise NoStabilizingSolutionError(
-            f"no stabilizing solution detected: the relative residual stays at {residual:.3g}")
     info = SolveInfo(residual=residual, method=method, steps=steps, refinements=refinements)
     return (P, info) if full_output else P
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 from contextlib import contextmanager
 from importlib import resources
 from pathlib import Path
@@ -85,6 +86,18 @@ def _open_store(path: Path, *, create: bool = True):
         raise UserError(f"cannot open the result store {path}: {exc.strerror or exc}") from None
 
 
+@contextmanager
+def _reading_store(path: Path):
+    """An existing store opened for ``compare report`` or ``export``; a store fault while reading exits 2."""
+    from .store import StoreError
+
+    with _open_store(path, create=False) as store:
+        try:
+            yield store
+        except StoreError as exc:
+            raise UserError(str(exc)) from None
+
+
 def _interrupt(signum, frame):
     raise KeyboardInterrupt
 
@@ -108,12 +121,17 @@ def _interrupt_on_sigterm():
 @contextmanager
 def _store_for_run(path: Path):
     """The store a run writes; one this command created is removed again if the command fails before any run."""
+    from .store import StoreError
+
     created = not path.exists()
     store = _open_store(path)
     try:
         yield store
     except BaseException:
-        empty = len(store) == 0
+        try:
+            empty = len(store) == 0
+        except StoreError:  # the store itself failed: keep the file as it is
+            empty = False
         store.close()
         if created and empty:
             path.unlink(missing_ok=True)
@@ -188,7 +206,44 @@ _PLUGIN_HELP = ("Import a module (by name) or a .py file that registers methods 
                 "and name a plain function as method = \"module:function\".")
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@contextmanager
+def _held_warnings():
+    """Hold this process's warnings (and those workers send back) until the command ends.
+
+    A command refused for bad input then prints its one ``Error:`` line alone: a library's
+    warning on the way there (scipy's, say, while an instance file is checked) is dropped.
+    Otherwise each distinct warning is shown at the end, once.
+    """
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            yield
+    except click.ClickException:
+        raise
+    except BaseException:
+        _show_warnings(caught)
+        raise
+    _show_warnings(caught)
+
+
+def _show_warnings(caught) -> None:
+    """Each distinct warning once, on stderr, as Python prints them."""
+    shown = set()
+    for w in caught:
+        key = (w.category, str(w.message), w.filename, w.lineno)
+        if key not in shown:
+            shown.add(key)
+            click.echo(warnings.formatwarning(w.message, w.category, w.filename, w.lineno), err=True, nl=False)
+
+
+class _Group(click.Group):
+    """The ``compare`` group: every command runs with its warnings held (:func:`_held_warnings`)."""
+
+    def invoke(self, ctx):
+        with _held_warnings():
+            return super().invoke(ctx)
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="grnn-codesign")
 def main():
     """Compare distributed controller designs on the same cost-versus-links axes."""
@@ -231,6 +286,7 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
     from .meta import MetaKind, meta_key
     from .runner import ExecutorError, StoreBusy, open_executor, run_experiment
     from .spec import SpecError, load_spec
+    from .store import StoreError
 
     try:
         spec = load_spec(experiment, plugins=plugins)
@@ -256,7 +312,7 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
             command = f"compare run {experiment}" + (f" --out {out}" if out != RESULTS / spec.name else "")
             store.set_meta(meta_key(MetaKind.COMMAND, spec.name), command)
             files = _write_report(store, out)
-    except (ExecutorError, StoreBusy) as exc:
+    except (ExecutorError, StoreBusy, StoreError) as exc:
         raise UserError(str(exc)) from None
     click.echo(f"report: {files['md']}")
 
@@ -286,7 +342,7 @@ def report(out, store_path):
         rebuild = "" if store_path is not None else f" and no runs.csv or report.json in {out} to rebuild from"
         raise UserError(f"no result store at {path}{rebuild}; run `compare run` first or pass --store")
     _check_writable(out)
-    with _open_store(path, create=False) as store:
+    with _reading_store(path) as store:
         if len(store) == 0:
             raise UserError(f"the store {path} holds no runs")
         files = _write_report(store, out)
@@ -337,7 +393,7 @@ def export(out, store_path, report_dir, fmt):
         raise UserError(str(exc)) from None
     from .export import write_designs
 
-    with _open_store(path, create=False) as store:
+    with _reading_store(path) as store:
         if len(store) == 0:
             raise UserError(f"the store {path} holds no runs")
         frame = store.to_pandas()

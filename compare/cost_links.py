@@ -3,11 +3,15 @@
 One *setting* is a method label with one set of hyperparameters (one γ of an ℓ1
 path, one β of a GRNN-Sparse path) run on every instance of a panel. Its summary
 point is the median link count (the lower median, so always a count some design
-has) against the median cost. Medians taken separately need not describe any one
-design: a β whose designs have 0 links on 17 of 30 instances, and more cost where
-they do, has medians (0 links, cost of the others). So the point is drawn only
-where it is *reached*, that is where at least one of the setting's designs has
-no more links and no more cost; every design is drawn faintly beside it.
+has) against the median cost. Medians taken separately are not paired and need not
+describe the typical instance: a β whose designs have 0 links on 17 of 30 instances,
+and more cost where they do, has medians (0 links, cost of the others). So the point
+is drawn only where it lies on or above its method's budget front at its link count
+(the median over instances of the best cost within that many links, the paired
+quantity the findings test): then at least half of the instances the method ran on
+reach it, that is some design of the method there has no more links and no more
+cost. A marker never stands below its own method's front. Every design is drawn
+faintly beside it, and the fronts are drawn through the cloud.
 """
 
 from __future__ import annotations
@@ -18,12 +22,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .figures import (OFF_SCALE, _y_limits, boundary_handles, draw_boundary, shared_y, excess, excess_axis,
-                      finish_legend, legend_handles, links_axis, method_gid, panel_figure, panel_heading)
+from .figures import (OFF_SCALE, _y_limits, boundary_handles, draw_boundary, draw_front_line, shared_y, excess,
+                      excess_axis, finish_legend, legend_handles, links_axis, method_gid, panel_figure, panel_heading)
 from .records import as_records
+from .statistics import front_quantiles
 from .styles import Style
 
-__all__ = ["Point", "aggregate", "pareto_front", "plot_cost_vs_links", "quartiles"]
+__all__ = ["Point", "aggregate", "pareto_front", "plot_cost_vs_links", "quartiles", "REACH_SHARE"]
+
+#: A summary point is drawn only where at least this share of its instances reach it.
+REACH_SHARE = 0.5
 
 
 def quartiles(values) -> tuple[float, float, float]:
@@ -40,10 +48,12 @@ class Point:
     """One design setting (label + hyperparameters) aggregated over instances.
 
     ``links`` and ``cost`` are (25 %, median, 75 %) over the usable designs; ``x`` the
-    lower median of their link counts (a count some design has); ``reached`` whether
-    some design has at most ``x`` links and at most the median cost (the summary point
-    describes a design that exists). ``params_key``, the canonical JSON of ``params``,
-    orders settings.
+    lower median of their link counts (a count some design has); ``reach`` the share of
+    the instances the method ran on in the panel where some design of the method has at
+    most ``x`` links and at most the median cost; ``reached`` whether the median cost is
+    at or above the method's budget front at ``x`` (so that ``reach`` is at least
+    :data:`REACH_SHARE`, and the marker never stands below the front it summarizes: the
+    point is drawn). ``params_key``, the canonical JSON of ``params``, orders settings.
     """
 
     panel: tuple
@@ -60,6 +70,7 @@ class Point:
     statuses: dict
     x: float = float("nan")
     reached: bool = False
+    reach: float = 0.0
 
 
 def aggregate(records) -> list[Point]:
@@ -67,16 +78,21 @@ def aggregate(records) -> list[Point]:
 
     ``records``: :class:`~compare.records.Records`, or dicts shaped like the store's rows.
     """
-    groups = as_records(records).group(lambda r: (r.instance.panel, r.label, r.info_model, r.params_key))
+    records = as_records(records)
+    groups = records.group(lambda r: (r.instance.panel, r.label, r.info_model, r.params_key))
+    methods = records.by_panel_label
     points = []
     for (panel, label, info, params_key), rs in sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1], kv[0][3])):
         ok = [r for r in rs if r.ok]
         costs = [r.cost for r in ok]
-        x, reached = float("nan"), False
+        x, reach, median, front = float("nan"), 0.0, float("nan"), float("inf")
         if ok:
             x = float(np.percentile([r.links for r in ok], 50, method="lower"))
             median = float(np.median(costs))
-            reached = any(r.links <= x and r.cost <= median for r in ok)
+            method = methods[(panel, label)]
+            hits = {r.instance.key for r in method if r.ok and r.links <= x and r.cost <= median}
+            reach = len(hits) / len(method.by_instance)
+            front = _front_at(method, x)
         points.append(
             Point(
                 panel=panel, label=label, info_model=info, params=rs[0].params, params_key=params_key,
@@ -86,10 +102,19 @@ def aggregate(records) -> list[Point]:
                 cost=quartiles(costs),
                 cost_mean=float(np.mean(costs)) if costs else float("nan"),
                 statuses=dict(Counter(r.status for r in rs)),
-                x=x, reached=reached,
+                x=x, reached=median >= front * (1 - 1e-12), reach=reach,
             )
         )
     return points
+
+
+def _front_at(method, links: float) -> float:
+    """The method's budget front at ``links``: median over its instances of the best cost within that many links."""
+    best: dict = {key: np.inf for key in method.by_instance}
+    for r in method:
+        if r.ok and r.links <= links:
+            best[r.instance.key] = min(best[r.instance.key], r.cost)
+    return float(front_quantiles(np.array(list(best.values()))[:, None])[0][1, 0])
 
 
 def pareto_front(points: list[Point]) -> list[Point]:
@@ -103,23 +128,23 @@ def pareto_front(points: list[Point]) -> list[Point]:
     return front
 
 
-def _dodge(series_by_label: dict, right: float) -> dict:
+def _dodge(series_by_label: dict) -> dict:
     """Label -> horizontal offset in points for single-setting methods that share an x position.
 
-    LQR, decentralized and autonomous sit at 0 or N(N-1) links, exactly where path
-    methods end: without an offset their markers hide each other.
+    Autonomous and decentralized both sit at 0 links: without an offset one hides the
+    other. The offsets are symmetric about the true link count, and a method alone at its
+    count is never moved (LQR once stood 6 points left of its 380 links, which on a log
+    axis read as about 230, left of the QI boundary).
     """
     at = defaultdict(list)
     for label, series in series_by_label.items():
         if len(series) == 1:
             at[round(series[0][0], 6)].append(label)
-    crowded = {x for x in at if len(at[x]) > 1 or any(
-        len(s) > 1 and any(round(p[0], 6) == x for p in s) for s in series_by_label.values())}
     offsets = {}
-    for x in crowded:
-        group = sorted(at[x])
-        for i, label in enumerate(group):
-            offsets[label] = 7.0 * (i - (len(group) - 1) / 2) + (6.0 if x == 0 else -6.0 if x >= right else 0.0)
+    for group in at.values():
+        if len(group) > 1:
+            for i, label in enumerate(sorted(group)):
+                offsets[label] = 7.0 * (i - (len(group) - 1) / 2)
     return offsets
 
 
@@ -148,22 +173,25 @@ def _mark_off_scale(ax, marks, top: float) -> int:
 
 
 def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: dict | None = None,
-                       boundaries: dict | None = None, instances: dict | None = None):
-    """Median cost against median links per design setting, one panel per (family, N, ‖A‖₂).
+                       boundaries: dict | None = None, instances: dict | None = None, fronts=None):
+    """Every design, each method's budget front through them, and its settings' medians, one panel per (family, N, ‖A‖₂).
 
-    Every usable design is a faint dot (when ``records`` are given); a setting's
-    summary marker is drawn only where :attr:`Point.reached`; settings of one
-    method are joined in the line style of its information model. Costs are excess
-    costs over centralized LQR on a log axis (:func:`compare.figures.excess_axis`);
-    medians above :data:`~compare.figures.OFF_SCALE` times LQR's are triangles on
-    the top edge with their value. With several N the x axis is links per node.
+    Every usable design is a faint dot (when ``records`` are given); each method's
+    budget front (:func:`compare.statistics.budget_fronts`: per instance the best cost
+    within L links, then the median over instances) is a step line in the line style
+    of its information model; a setting's summary marker is drawn, unconnected, only
+    where :attr:`Point.reached` (on or above its method's front). Costs are
+    excess costs over centralized LQR on a log axis
+    (:func:`compare.figures.excess_axis`); medians above
+    :data:`~compare.figures.OFF_SCALE` times LQR's are triangles on the top edge with
+    their value. With several N the x axis is links per node.
 
     Parameters
     ----------
     points : list of Point
         From :func:`aggregate`.
     records : Records, optional
-        The designs behind ``points``, drawn faintly.
+        The designs behind ``points``, drawn faintly, and their fronts (unless ``fronts`` is given).
     axes : dict, optional
         Panel -> Axes; a new figure is made if omitted.
     styles : dict, optional
@@ -172,6 +200,8 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
         Panel -> plant-graph link count, drawn as the QI boundary when a delayed method is present.
     instances : dict, optional
         Panel -> number of instances, for the panel titles.
+    fronts : list of :class:`compare.statistics.Front`, optional
+        The fronts to draw; by default those of ``records`` (none without records).
 
     Returns
     -------
@@ -179,24 +209,31 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
     """
     from matplotlib.transforms import offset_copy
 
+    from .statistics import budget_fronts
+
     panels = sorted({p.panel for p in points})
     labels = sorted({p.label for p in points})
     styles = styles or {p.label: Style("#333333", "o", p.info_model) for p in points}
     fig, axes, own = panel_figure(panels, axes)
     per_node = len({p[1] for p in panels}) > 1
     designs = as_records(records).by_panel if records is not None else {}
+    if fronts is None:
+        fronts = budget_fronts(records) if records is not None else []
 
-    def shown_costs(group):
-        return [p.cost[1] for p in group if p.ok and p.reached and p.cost[1] <= OFF_SCALE]
+    def shown_costs(group, panel_fronts):
+        costs = [p.cost[1] for p in group if p.ok and p.reached]
+        costs += [c for f in panel_fronts for c in f.cost[1] if np.isfinite(c)]
+        return [c for c in costs if c <= OFF_SCALE]
 
-    limits = _y_limits(shown_costs(points)) if shared_y(panels) else None
+    limits = _y_limits(shown_costs(points, fronts)) if shared_y(panels) else None
     for panel in panels:
         ax = axes[panel]
         usable = [p for p in points if p.panel == panel and p.ok > 0]
         if not usable:
             continue
+        mine = {f.label: f for f in fronts if f.panel == panel}
         scale = panel[1] if per_node and panel[1] else 1.0  # links per node; 0: a family without n
-        bottom, top = limits or _y_limits(shown_costs(usable))
+        bottom, top = limits or _y_limits(shown_costs(usable, mine.values()))
         right = max(p.links[2] for p in usable) / scale
         for label, rs in (designs[panel].by_label.items() if panel in designs else ()):
             ok = [r for r in rs if r.ok]
@@ -204,9 +241,11 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
                 s = styles[label]
                 ax.scatter([r.links / scale for r in ok], excess([r.cost for r in ok], bottom), s=7, color=s.colour,
                            marker=s.marker, alpha=0.18, linewidths=0, zorder=1)
+        for label, f in sorted(mine.items()):
+            draw_front_line(ax, f, styles[label], bottom, right * scale, scale)
         series = {label: sorted((p.x / scale, p.cost[1]) for p in usable if p.label == label and p.reached)
                   for label in labels}
-        offsets = _dodge({k: v for k, v in series.items() if v}, right)
+        offsets = _dodge({k: v for k, v in series.items() if v})
         off_scale = []
         for label in labels:
             if not series[label]:
@@ -221,10 +260,10 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
             off_scale += [(xi, yi, s.colour) for xi, yi in zip(x[~inside], y[~inside])]
             if not inside.any():
                 continue  # an empty line drawn unclipped would sit at the figure's origin and spoil the layout
-            ax.plot(x[inside], excess(y[inside], bottom), color=s.colour, marker=s.marker,
-                    linestyle=s.linestyle if inside.sum() > 1 else "none", markersize=(6.5 if len(x) == 1 else 5.5) * (1.5 if s.marker == "*" else 1),
+            ax.plot(x[inside], excess(y[inside], bottom), color=s.colour, marker=s.marker, linestyle="none",
+                    markersize=(6.5 if len(x) == 1 else 5.5) * (1.5 if s.marker == "*" else 1),
                     markerfacecolor=s.face, markeredgecolor=s.edge,
-                    markeredgewidth=s.edge_width, linewidth=1.3, transform=transform,
+                    markeredgewidth=s.edge_width, transform=transform,
                     # Single-setting methods over the paths whose ends they share (decentralized = γ = ∞).
                     zorder=6 if label.startswith("LQR") else 5 if len(x) == 1 else 4, clip_on=False,
                     gid=method_gid(label))
@@ -234,8 +273,7 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
         # below it (or at or below 0, far off a log axis, which blew a figure up to 390,000 px).
         if off_scale:
             _mark_off_scale(ax, off_scale, ax.get_ylim()[1])
-        ax.set_xlabel("directed off-diagonal links per node (median)" if per_node
-                      else "directed off-diagonal links (median)")
+        ax.set_xlabel("directed off-diagonal links per node" if per_node else "directed off-diagonal links")
         ax.set_ylabel("excess cost over LQR")
         ax.set_title(panel_heading(panel, (instances or {}).get(panel)), fontsize=10)
         if boundaries and panel in boundaries and any(p.info_model == "delayed" for p in usable):
@@ -243,6 +281,7 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
         ax.grid(True, which="major", alpha=0.3)
     if own:
         finish_legend(fig, legend_handles(styles, labels) + boundary_handles(axes.values()),
-                      title="marker: median over instances\nfaint: every instance's design")
+                      title="line: median over instances of the best\ncost within L links (budget front)\n"
+                            "marker: one setting's medians, where on\nor above its method's front\n"
+                            "faint: every instance's design")
     return fig, axes
-

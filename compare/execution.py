@@ -10,7 +10,9 @@ after :func:`_limit_threads`; :mod:`compare.runner` calls it directly with one w
 from __future__ import annotations
 
 import os
+import pickle
 import time
+import warnings
 from contextlib import contextmanager
 from functools import lru_cache
 
@@ -24,8 +26,8 @@ from .plugins import load_plugins
 from .registry import get_method
 from .spec import Run
 
-__all__ = ["build_instance", "instance_facts", "execute_run", "execute_task", "failed_run", "unsendable",
-           "ExecutorError", "WorkerSetupError"]
+__all__ = ["build_instance", "instance_facts", "execute_run", "execute_task", "execute_task_sendable", "failed_run",
+           "unsendable", "sendable_results", "reissue_warnings", "ExecutorError", "WorkerSetupError"]
 
 # RAYON_NUM_THREADS: Clarabel's faer factorization runs on a rayon pool that otherwise takes every
 # core (seen: SLS at N = 100 kept a second thread busy, so two workers ran three threads on 2 cores).
@@ -79,6 +81,71 @@ def unsendable(run: Run, result: tuple, exc: Exception) -> tuple:
     _, seconds, peak_mb = result
     return (failed_run(run, f"its design could not be sent back from the worker process "
                             f"({type(exc).__name__}: {exc}); a method's designs must pickle"), seconds, peak_mb)
+
+
+def unstorable(run: Run, result: tuple, exc: Exception) -> tuple:
+    """The result recorded for a run whose designs the store cannot hold (params or extras not JSON)."""
+    _, seconds, peak_mb = result
+    return (failed_run(run, f"its design could not be stored ({type(exc).__name__}: {exc}); a method's params "
+                            "and extras must hold numbers, strings, lists and dicts only"), seconds, peak_mb)
+
+
+def _sendable(run: Run, result: tuple) -> bytes:
+    try:
+        data = pickle.dumps(result)
+    except Exception as exc:  # noqa: BLE001 - any pickling error is this run's fault
+        return pickle.dumps(unsendable(run, result, exc))
+    try:
+        for design in result[0]:
+            design.to_record()  # what the store will write: its JSON fails here, not in the client
+    except Exception as exc:  # noqa: BLE001 - whatever the extras' JSON raises is this run's fault
+        return pickle.dumps(unstorable(run, result, exc))
+    return data
+
+
+def sendable_results(runs: list[Run], results: list[tuple]) -> list[bytes]:
+    """Each run's result pickled once, in the process that computed it, ready to send back.
+
+    A run whose designs do not pickle (:func:`unsendable`) or do not go into the store's
+    JSON (:func:`unstorable`) gets its ``failed`` design instead. Checked here, run by
+    run, so that such a fault is its own run's status on every executor: otherwise
+    dask reschedules a task whose result it cannot serialize, again and again, and the
+    client's store write raises.
+    """
+    return [_sendable(run, result) for run, result in zip(runs, results)]
+
+
+def execute_task_sendable(runs: list[Run], plugins=()) -> tuple[list[bytes], list[tuple]]:
+    """:func:`execute_task` in a worker: its results as :func:`sendable_results`, and the warnings it raised.
+
+    The warnings (``(message, category, filename, lineno)``, see :func:`reissue_warnings`)
+    go back to the client instead of the worker's stderr, where they would land in the
+    middle of the progress bar, or above a one-line error the run ends with.
+    """
+    with warnings.catch_warnings(record=True) as caught:  # the process's filters: each place once
+        results = sendable_results(runs, execute_task(runs, plugins))
+    return results, [_warning_fields(w) for w in caught]
+
+
+def _warning_fields(w: warnings.WarningMessage) -> tuple:
+    category = w.category
+    try:
+        pickle.dumps(category)  # a plug-in's own class may not unpickle in the client
+    except Exception:  # noqa: BLE001
+        category = UserWarning
+    return str(w.message), category, w.filename, w.lineno
+
+
+def reissue_warnings(fields: list[tuple], registry: dict | None = None) -> None:
+    """Raise again, in this (client) process, the warnings a worker sent back (:func:`execute_task_sendable`).
+
+    They then go where this process's warnings go: the ``compare`` command holds them
+    until it ends (:mod:`compare.cli`); ``registry`` shows each place's warning once.
+    """
+    for message, category, filename, lineno in fields:
+        if not (isinstance(category, type) and issubclass(category, Warning)):
+            category = UserWarning
+        warnings.warn_explicit(message, category, filename, lineno, registry=registry)
 
 
 _STATUS_FILE = "/proc/self/status"

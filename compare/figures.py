@@ -26,7 +26,7 @@ from .styles import BOUND_COLOUR, INFO_MODELS, INFO_ORDER, Style, label_styles  
 
 __all__ = ["LINESTYLES", "OFF_SCALE", "FLOOR", "excess", "excess_axis", "panel_grid", "panel_heading",
            "legend_handles", "finish_legend", "draw_boundary", "boundary_handles", "plot_budget_fronts",
-           "label_styles", "method_gid", "drawn_styles", "axis_floor", "panel_figure"]
+           "label_styles", "method_gid", "front_gid", "draw_front_line", "drawn_styles", "axis_floor", "panel_figure"]
 
 #: Line style and description per information model (from :data:`compare.styles.INFO_MODELS`).
 LINESTYLES = {info: (style, text) for info, (style, _, text) in INFO_MODELS.items()}
@@ -71,6 +71,25 @@ def excess_axis(ax, low: float, high: float) -> None:
 def method_gid(label: str) -> str:
     """The gid set on every artist drawn for a method, so that tests and tools can find what was drawn."""
     return f"method:{label}"
+
+
+def front_gid(label: str) -> str:
+    """The gid of a method's budget-front line, so that tests read the curves a figure draws."""
+    return f"front:{label}"
+
+
+def draw_front_line(ax, front, style, bottom: float, right: float, scale: float = 1.0, *, linewidth: float = 1.5):
+    """A front's median as a step line to the right edge (``right`` links); gaps where it is not defined.
+
+    Its last step holds to ``right * 1.15 + 1`` links, where the links axis ends. Returns
+    ``(x, y)`` as drawn (y the excess cost, NaN in the gaps).
+    """
+    x = np.append(front.budgets, max(right, front.budgets[-1]) * 1.15 + 1) / scale
+    median = np.append(front.cost[1], front.cost[1][-1])
+    y = np.where(np.isfinite(median), excess(median, bottom), np.nan)
+    ax.step(x, y, where="post", color=style.colour, linestyle=style.linestyle, linewidth=linewidth,
+            gid=front_gid(front.label))
+    return x, y
 
 
 def drawn_styles(fig) -> dict[str, set]:
@@ -214,10 +233,12 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
                        bounds: dict | None = None):
     """Best cost within each link budget: median over instances (step curve) and 25–75 % band.
 
-    A front starts at the budget where every instance with a design of the method has
-    one (:attr:`compare.statistics.Front.start`), marked by the method's marker; the
-    band spans the 25–75 % quantiles over those instances (spread across instances,
-    not uncertainty of the median). Costs are excess costs over centralized LQR on a
+    A front starts at the budget where more than half of the instances the method ran
+    on have a design within it (:attr:`compare.statistics.Front.start`), marked by the
+    method's marker; the band spans the 25–75 % quantiles over those instances (spread
+    across instances, not uncertainty of the median; an instance without a design within
+    the budget counts as above every design, so the band runs to the top edge while a
+    quarter of them or more have none). Costs are excess costs over centralized LQR on a
     log axis (:func:`excess_axis`).
 
     Parameters
@@ -260,13 +281,13 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
         bottom, top = limits or _y_limits(shown_costs(mine))
         for f in mine:
             s = _style(styles, f.label)
-            x = np.append(f.budgets, max(right * scale, f.budgets[-1]) * 1.15 + 1) / scale
-            q1, med, q3 = (np.append(row, row[-1]) for row in f.cost)
             # Not started (inf) leaves a gap, not a line off the axis.
-            q1, med, q3 = (np.where(np.isfinite(v), excess(v, bottom), np.nan) for v in (q1, med, q3))
-            ax.step(x, med, where="post", color=s.colour, linestyle=s.linestyle, linewidth=1.5,
-                    gid=method_gid(f.label))
-            ax.fill_between(x, q1, q3, step="post", color=s.colour, alpha=0.08, linewidth=0)
+            x, _ = draw_front_line(ax, f, s, bottom, right * scale, scale)
+            # A quartile at inf (a quarter of the instances without a design) runs the band to the top edge.
+            q1, q3 = (np.append(row, row[-1]) for row in (f.cost[0], f.cost[2]))
+            q1 = np.where(np.isfinite(q1), excess(q1, bottom), np.nan)
+            q3 = np.where(np.isfinite(q3), excess(q3, bottom), 1e12)
+            ax.fill_between(x, q1, q3, where=np.isfinite(q1), step="post", color=s.colour, alpha=0.08, linewidth=0)
             if f.start is not None and np.nanmin(f.cost[1]) > OFF_SCALE:
                 above.setdefault(panel, []).append(f"{f.label} ({np.nanmin(f.cost[1]):.3g})")
             elif f.start is not None:

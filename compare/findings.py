@@ -24,6 +24,18 @@ adjusted p < 0.05; an interval excluding 0 alone gives the direction, "not
 significant after Holm's correction"; with 5 instances or fewer no 95 % interval
 exists, and only counts are given.
 
+Two verdicts guard the claims against what a reader cannot see. Differences smaller
+than :data:`PRACTICAL_MARGIN` (0.1 % of centralized LQR's cost) are *equal*, never
+"beats": the paper reports costs to three decimals, the figures draw everything
+within 0.1 % of LQR on their bottom edge, and the margin is above every solver's
+tolerance (ℓ1 paths polished to about 1e-5, SLS by Clarabel to about 1e-8) and above
+the median standard error of a simulated cost (about 2e-4 in the shipped reports).
+And a difference the paired test finds, but which the budget fronts as drawn (the
+median over instances of each method's best cost, :mod:`compare.statistics`) order
+the other way, is *mixed*: the typical instance favours one design while the median
+costs favour the other, so no single order is claimed, and no figure contradicts a
+finding.
+
 Simulated costs whose standard error stays above :data:`UNCERTAIN_RSE` of the cost
 are unresolved (rare divergent draws dominate them) and enter no claim: those
 designs are dropped before best costs are taken, and each comparison counts the
@@ -41,10 +53,11 @@ import numpy as np
 from scipy import stats
 
 from .records import Records, as_records
-from .statistics import Paired, best_within, instances_by_panel, paired_difference, panel_budgets, panel_nodes
+from .statistics import (Paired, best_within, front_quantiles, instances_by_panel, paired_difference, panel_budgets,
+                         panel_nodes)
 from .styles import Style, style_for
 
-__all__ = ["UNCERTAIN_RSE", "BOUND_LABEL", "ALPHA", "Comparison", "is_unresolved", "unresolved", "is_sls_bound",
+__all__ = ["UNCERTAIN_RSE", "BOUND_LABEL", "ALPHA", "PRACTICAL_MARGIN", "Comparison", "is_unresolved", "unresolved", "is_sls_bound",
            "select_comparisons", "holm", "sign_test", "budgets_per_node"]
 
 #: Above this relative standard error a simulated cost is unresolved: not a number to compare
@@ -54,6 +67,8 @@ UNCERTAIN_RSE = 0.01
 BOUND_LABEL = "SLS bound (complete graph)"
 #: Family-wise level of the Holm-adjusted sign tests.
 ALPHA = 0.05
+#: Differences of best costs below this, in units of centralized LQR's cost, are "equal" (see the module text).
+PRACTICAL_MARGIN = 1e-3
 #: In a plan, "each panel's own budgets" (:func:`compare.statistics.panel_budgets`, or the caller's).
 _PANEL_BUDGETS = "budgets"
 
@@ -188,6 +203,12 @@ class Comparison:
     per_node : float or None
         ``budget`` per node of the panel (None: any, or no node count known): the forest
         plot's row where panels of different sizes have different budgets.
+    drawn_a, drawn_b : float
+        Each side's median best cost within the budget as the budget fronts draw it (over
+        the instances it ran on, every design counted; ``inf`` where it is not drawn).
+    label_a, label_b : str or None
+        The label each side is drawn under in the figures (None where the findings split
+        a label the figures keep whole).
     """
 
     panel: tuple
@@ -207,6 +228,10 @@ class Comparison:
     method_b: str = ""
     style_a: Style | None = None
     per_node: float | None = None
+    drawn_a: float = math.inf
+    drawn_b: float = math.inf
+    label_a: str | None = None
+    label_b: str | None = None
 
     def budget_tier(self, per_node: bool):
         """This cell's budget as figures and text name it: links, or links per node (see :func:`budgets_per_node`)."""
@@ -218,15 +243,43 @@ class Comparison:
         return self.paired.too_few
 
     @property
-    def significant(self) -> bool:
-        """The interval excludes 0 and the Holm-adjusted sign test rejects at :data:`ALPHA`."""
+    def equal(self) -> bool:
+        """The median difference is within :data:`PRACTICAL_MARGIN`, and the interval excludes 0 or lies within it.
+
+        (A median that small with an interval reaching past the margin on both sides
+        is "no clear difference": the data do not say that the two are equal.)
+        """
+        p, m = self.paired, PRACTICAL_MARGIN
+        if not abs(p.median) < m:
+            return False
+        return (-m < p.low and p.high < m) or not p.inconclusive
+
+    @property
+    def tested(self) -> bool:
+        """The interval excludes 0 and the Holm-adjusted sign test rejects at :data:`ALPHA` (before the margin)."""
         return not self.too_few and not self.paired.inconclusive and self.p_holm < ALPHA
 
     @property
+    def mixed(self) -> bool:
+        """Tested, beyond the margin, yet the budget fronts as drawn order the two the other way."""
+        if not self.tested or self.equal or not (math.isfinite(self.drawn_a) and math.isfinite(self.drawn_b)):
+            return False
+        return (self.drawn_a - self.drawn_b) * self.paired.median < 0
+
+    @property
+    def significant(self) -> bool:
+        """A claim: tested, not equal within the margin, and drawn in the same order (one "beats" the other)."""
+        return self.tested and not self.equal and not self.mixed
+
+    @property
     def verdict(self) -> str:
-        """"better" or "worse" (a against b), "no significant difference", or "too few"."""
+        """"better" or "worse" (a against b), "equal", "mixed", "no significant difference", or "too few"."""
+        if self.equal:
+            return "equal"
         if self.too_few:
             return "too few"
+        if self.mixed:
+            return "mixed"
         if not self.significant:
             return "no significant difference"
         return "better" if self.paired.high < 0 else "worse"
@@ -364,6 +417,7 @@ def select_comparisons(records, *, budgets=None, pairs=()) -> list[Comparison]:
     kept = _tables(Records(r for r, k in zip(records, keep) if k), [x for x, k in zip(labels, keep) if k],
                    panels, grids)
     plan = sorted(_plan(arms, pairs), key=lambda item: _group_rank(item[3]))
+    drawn_labels = _drawn_labels(records, labels)
     out = []
     for a, b, pair_budgets, group in plan:
         for panel in sorted(panels, key=_panel_order):
@@ -382,12 +436,28 @@ def select_comparisons(records, *, budgets=None, pairs=()) -> list[Comparison]:
                 ia, ib = arms[a].info_model, arms[b].info_model
                 nodes = panel_node_count[panel]
                 per_node = None if budget is None or not nodes else budget / nodes
+                drawn = [_drawn_median(full[(panel, x)][:, k]) for x in (a, b)]
                 out.append(Comparison(panel, a, b, budget, paired, "same" if ia == ib else "cross", ia, ib,
                                       sign_test(paired.a_wins, paired.b_wins), 1.0, excluded, group,
                                       len(panels[panel]), arms[a].method, arms[b].method, arms[a].style,
-                                      per_node))
+                                      per_node, *drawn, *(drawn_labels.get(x) for x in (a, b))))
     adjusted = holm([c.p_value for c in out])
     return [replace(c, p_holm=p) for c, p in zip(out, adjusted)]
+
+
+def _drawn_median(best) -> float:
+    """The median of one budget's best costs (instances, NaN where not run) as the budget fronts draw it."""
+    return float(front_quantiles(np.asarray(best, dtype=float)[:, None])[0][1, 0])
+
+
+def _drawn_labels(records: Records, labels: list[str]) -> dict[str, str]:
+    """Arm label -> the record label its designs are drawn under, where that is one label drawn for this arm alone."""
+    originals: dict[str, set] = {}
+    arms_of: dict[str, set] = {}
+    for r, label in zip(records, labels):
+        originals.setdefault(label, set()).add(r.label)
+        arms_of.setdefault(r.label, set()).add(label)
+    return {arm: next(iter(o)) for arm, o in originals.items() if len(o) == 1 and len(arms_of[next(iter(o))]) == 1}
 
 
 def budgets_per_node(comparisons: Sequence[Comparison]) -> bool:

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from .records import Records, as_records, canonical_key
+from .records import Records, as_records, canonical_key, row_problem
 from .drawing import InstanceDrawing
 from .meta import StoreMeta
 
@@ -373,6 +373,9 @@ def _read_runs(path: Path) -> tuple[list[dict], dict[str, dict]]:
             row = _parse_run(cells)
         except ValueError as exc:  # json.JSONDecodeError included
             raise FolderError(f"{path} line {line}: {_one_line(exc)}") from None
+        problem = row_problem(row)  # the store's check: a hand edit must not change the findings unnoticed
+        if problem is not None:
+            raise FolderError(f"{path} line {line}: {problem}")
         key = (row["run_key"], row["idx"])
         if key in seen:
             raise FolderError(f"{path} line {line}: design ({key[0]}, {key[1]}) again (first on line {seen[key]})")

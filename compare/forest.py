@@ -1,9 +1,11 @@
 """The forest plot that a report's Findings come from: one row per comparison, one column per panel.
 
 Each row is a :class:`compare.findings.Comparison` cell: the median paired difference
-of best costs (first − second) and its 95 % interval, a filled marker where the first
-beats the second (interval excludes 0 and Holm-adjusted sign test p < 0.05), hollow
-otherwise, grey where too few instances allow no 95 % interval.
+of best costs (first − second) and its 95 % interval, a filled marker where one beats
+the other (:attr:`Comparison.significant`: interval excludes 0, Holm-adjusted sign test
+p < 0.05, beyond the practical margin, and the budget fronts agree), hollow otherwise
+(not significant, no clear difference, equal within 0.1 % of LQR's cost, or mixed),
+grey where too few instances allow no 95 % interval.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter  # noqa: E402
 from matplotlib.transforms import blended_transform_factory  # noqa: E402
 
-from .findings import BOUND_LABEL, X_CAP, Comparison, budgets_per_node  # noqa: E402
+from .findings import BOUND_LABEL, PRACTICAL_MARGIN, X_CAP, Comparison, budgets_per_node  # noqa: E402
 from .statistics import panel_title  # noqa: E402
 from .styles import BOUND_COLOUR  # noqa: E402
 
@@ -135,9 +137,10 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
 
     Each row shows the median paired difference a − b (LQR-normalized cost) with its
     distribution-free interval as a bar, in ``a``'s colour and marker; the marker is
-    filled where the interval excludes 0 and the Holm-adjusted sign test has p < 0.05,
-    hollow otherwise, and grey where too few instances allow a 95 % interval. Rows
-    are grouped under headings by relation (same information model, crossing models).
+    filled where the cell is a claim (:attr:`Comparison.significant`), hollow otherwise
+    (equal within the practical margin and mixed cells among them), and grey where too
+    few instances allow a 95 % interval. Rows are grouped under headings by relation
+    (same information model, crossing models).
 
     Parameters
     ----------
@@ -202,7 +205,7 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
             if c is not None:
                 _draw_row(ax, c, ry, styles, edge)
         n = max((c.panel_instances for c in comparisons if c.panel == panel), default=0)
-        ax.set_title(f"{panel_title(panel)}\n{n} instances", fontsize=9)
+        ax.set_title(f"{panel_title(panel)}\n{n} instance{'' if n == 1 else 's'}", fontsize=9)
         ax.tick_params(axis="both", labelsize=_TICK_POINTS)
         ax.grid(axis="x", color="0.85", linewidth=0.5, which="both")
         ax.set_axisbelow(True)
@@ -223,7 +226,7 @@ def plot_forest(comparisons: Sequence[Comparison], styles: Mapping, *, axes=None
     if not comparisons:
         first.text(0.5, 0.5, "no comparisons", transform=first.transAxes, ha="center", va="center")
     if created:
-        fig.legend(handles=_legend_handles(), loc="lower center", ncol=3, frameon=False, fontsize=8,
+        fig.legend(handles=_legend_handles(), loc="lower center", ncol=2, frameon=False, fontsize=8,
                    bbox_to_anchor=(0.5, 0.0))
     return fig, axes
 
@@ -258,8 +261,10 @@ def _draw_row(ax, c: Comparison, y: float, styles: Mapping, edge: float) -> None
 def _legend_handles() -> list:
     common = dict(linestyle="-", marker="o", markersize=6, markeredgewidth=1.2)
     return [Line2D([], [], color="0.2", markerfacecolor="0.2",
-                   label="interval excludes 0 and Holm-adjusted sign test p < 0.05", **common),
-            Line2D([], [], color="0.2", markerfacecolor="white", label="not significant after Holm, or no clear difference", **common),
+                   label="beats: interval excludes 0, Holm-adjusted sign test p < 0.05", **common),
+            Line2D([], [], color="0.2", markerfacecolor="white",
+                   label=f"hollow: not significant after Holm, no clear difference, equal within "
+                         f"{100 * PRACTICAL_MARGIN:g} % of LQR's cost, or mixed", **common),
             Line2D([], [], color=_TOO_FEW_COLOUR, markerfacecolor="white",
                    label="≤ 5 instances: too few for a 95 % interval", **common),
             Line2D([], [], color="none", label="median paired Δ (LQR = 1) and its 95 % interval; Δ < 0: first "

@@ -1,8 +1,12 @@
 """The report's HTML page: the Markdown report with a table of contents and interactive figures.
 
-The page is one file beside its figures: PNGs are inlined, and the interactive
-figures (:mod:`compare.interactive`) load ``plotly.min.js`` from the same folder
-(:func:`write_plotly_js`), so the page opens from disk without a network.
+The page is one file beside its figures: PNGs are inlined, each a link to its
+full-size file, and the interactive figures (:mod:`compare.interactive`) load
+``plotly.min.js`` from the same folder (:func:`write_plotly_js`), so the page opens
+from disk without a network. It reads at any width from about 800 px: the
+interactive figures' panels reflow into one column below 900 px, their legends are
+HTML above the panels, and nothing scrolls the page sideways (wide tables and code
+scroll in their own boxes).
 """
 
 from __future__ import annotations
@@ -25,7 +29,8 @@ COLLAPSE_ROWS = 12
 
 _CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; max-width: 1200px; margin: 2em auto;
-       padding: 0 1em; color: #222; line-height: 1.45; }
+       padding: 0 1em; color: #222; line-height: 1.45; overflow-wrap: break-word; }
+p code, li code { overflow-wrap: anywhere; }
 h1 { font-size: 1.7em; border-bottom: 2px solid #ddd; padding-bottom: 0.2em; }
 h2 { font-size: 1.35em; margin-top: 2em; border-bottom: 1px solid #e3e3e3; padding-bottom: 0.15em; }
 h3 { font-size: 1.1em; margin-top: 1.5em; }
@@ -43,8 +48,9 @@ tbody tr:nth-child(even) { background: #fafafa; }
 details { margin: 0.5em 0 1.5em; }
 details > summary { cursor: pointer; color: #0b5cad; font-size: 0.93em; }
 details > .table-wrap { margin-top: 0.5em; }
-img { max-width: 100%; }
-figure.interactive { margin: 1em 0 2em; }
+img { max-width: 100%; height: auto; }
+a.full-size { display: inline-block; max-width: 100%; }
+figure.interactive { margin: 1em 0 2em; min-width: 0; }
 figure.interactive figcaption { font-size: 0.85em; color: #666; text-align: right; }
 pre { background: #f6f6f6; padding: 0.8em; overflow-x: auto; }
 code { font-size: 0.92em; }
@@ -97,6 +103,21 @@ def _swap_figures(body: str, folder: Path, interactive: Mapping[str, str]) -> tu
     return re.sub(pattern, swap, body), count
 
 
+def _link_images(body: str) -> str:
+    """Every image that is not already a link opens its full-size file: an ``<img>`` in an ``<a href>`` to its src.
+
+    The page shows figures at the column's width (a wide figure shrinks); the link opens the file itself.
+    """
+    out, last = [], 0
+    for match in re.finditer(r'<img\b[^>]*?\bsrc="(?P<src>[^"]+)"[^>]*>', body):
+        before = body[:match.start()]
+        if before.rfind("<a ") > before.rfind("</a>") or match.group("src").startswith("data:"):
+            continue  # inside a link already, or not a file
+        out += [body[last:match.start()], f'<a class="full-size" href="{match.group("src")}">{match.group(0)}</a>']
+        last = match.end()
+    return "".join(out) + body[last:]
+
+
 def _inline_pngs(body: str, folder: Path) -> str:
     def inline(match):
         path = folder / html.unescape(match.group(1))
@@ -130,8 +151,11 @@ def _check_ids(body: str) -> None:
 
 
 def _with_toc(body: str, toc: str) -> str:
-    """The table of contents after the page's first h1 (at the top without one)."""
+    """The table of contents before the page's first h2: after the title and the answer that opens a report."""
     nav = f'<nav class="toc"><strong>Contents</strong>\n{toc}</nav>'
+    first = re.search(r"<h2[ >]", body)
+    if first:
+        return body[:first.start()] + nav + "\n" + body[first.start():]
     head = re.search(r"</h1>", body)
     return body[:head.end()] + "\n" + nav + body[head.end():] if head else nav + "\n" + body
 
@@ -156,8 +180,10 @@ def render_html(markdown_text: str, folder: Path, title: str, interactive: dict[
     -------
     str
         The page: a table of contents of the h2/h3 headings, long tables collapsed,
-        and, if any interactive figure was put in, a ``<script>`` that loads
-        ``plotly.min.js`` from the page's folder (write it with :func:`write_plotly_js`).
+        every other image a link to its file, and, if any interactive figure was put
+        in, a ``<script>`` that loads ``plotly.min.js`` from the page's folder (write it
+        with :func:`write_plotly_js`) and the figures' script and style
+        (:data:`compare.interactive.FIGURE_JS`, :data:`~compare.interactive.FIGURE_CSS`).
     """
     folder = Path(folder)
     md = markdown.Markdown(extensions=["tables", "fenced_code", "toc"],
@@ -167,11 +193,16 @@ def render_html(markdown_text: str, folder: Path, title: str, interactive: dict[
     if interactive:
         body, figures = _swap_figures(body, folder, interactive)
     _check_ids(body)
-    body = _wrap_tables(_inline_pngs(body, folder))
+    body = _wrap_tables(_inline_pngs(_link_images(body), folder))
     if "<li" in md.toc:  # any h2/h3 heading
         body = _with_toc(body, md.toc)
-    script = f'<script src="{PLOTLY_JS}" charset="utf-8"></script>\n' if figures else ""
+    css, script = _CSS, ""
+    if figures:
+        from .interactive import FIGURE_CSS, FIGURE_JS
+
+        css += FIGURE_CSS
+        script = f'<script src="{PLOTLY_JS}" charset="utf-8"></script>\n<script>{FIGURE_JS}</script>\n'
     return (f"<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
             f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n"
-            f"<title>{html.escape(title)}</title>\n<style>{_CSS}</style>\n{script}</head>\n"
+            f"<title>{html.escape(title)}</title>\n<style>{css}</style>\n{script}</head>\n"
             f"<body>\n{body}\n</body>\n</html>\n")

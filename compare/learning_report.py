@@ -15,7 +15,8 @@ import scipy.stats
 from .records import OK_STATUSES, as_records
 
 __all__ = ["table1_markdown", "training_curves_figure", "bootstrap_interval", "PAPER_TABLE1", "PAPER_SPARSE_EDGES",
-           "PAPER_STATISTIC", "GAP_NOTES", "SPARSE_EDGES_NOTE", "DASH"]
+           "PAPER_STATISTIC", "GAP_NOTES", "GAP_REASONS", "SPARSE_EDGES_NOTE", "DASH", "PaperValue", "paper_values",
+           "gap_z"]
 
 #: Paper Table 1 (docs/reproduction.md): median normalized cost over 50 instances; autonomous is a mean.
 PAPER_TABLE1 = {
@@ -65,13 +66,31 @@ SPARSE_EDGES_NOTE = (
 _NOISE_Z = 2.0
 
 
+#: What is known about a Table 1 gap beyond sampling noise, in a few words (the answer at the top of a report
+#: gives it; :data:`GAP_NOTES` has the full text), to follow "GCNN's gap is": a documented paper-code
+#: difference, or what was ruled out. Methods not listed have no known cause.
+GAP_REASONS: dict[str, str] = {
+    "gcnn": ("a documented paper-code difference (the paper's table shows GCNNs trained without weight decay; "
+             "its code, like ours, uses 2)"),
+    "grnn_fixed": "unexplained (the paper's code trains the same model the same way)",
+    "grnn_dense": "unexplained (the paper's code trains the same model the same way)",
+}
+
+
+def gap_z(stat: float, paper: float, low: float, high: float) -> float:
+    """Our statistic minus the paper's, in standard errors of that difference (from our 95 % interval).
+
+    The paper's statistic is computed on its own random instances (its code seeds
+    nothing) and carries the same sampling noise as ours: the difference has sqrt(2)
+    times the spread of one statistic, estimated from our bootstrap interval.
+    """
+    spread = (high - low) / (2 * scipy.stats.norm.ppf(0.975))  # the interval is a 95 % one
+    return (stat - paper) / (np.sqrt(2) * spread) if spread > 0 else np.inf
+
+
 def _gap_note(method, stat, paper, low, high) -> str:
     """Why a paper value lies outside our interval: instance noise, or what else is known."""
-    # The paper's statistic is computed on its own random instances (its code seeds
-    # nothing) and carries the same sampling noise as ours: the difference has sqrt(2)
-    # times the spread of one statistic, estimated from our bootstrap interval.
-    spread = (high - low) / (2 * scipy.stats.norm.ppf(0.975))  # the interval is a 95 % one
-    z = (stat - paper) / (np.sqrt(2) * spread) if spread > 0 else np.inf
+    z = gap_z(stat, paper, low, high)
     if abs(z) < _NOISE_Z:
         return (f"Within instance-sampling noise: {z:+.1f} standard deviations of the difference "
                 "between two statistics over independent instance draws (the paper's instances cannot be "
@@ -218,6 +237,68 @@ def _caption() -> str:
     )
 
 
+@dataclass(frozen=True)
+class PaperValue:
+    """One paper Table 1 value against ours: what :func:`paper_values` gives for each (method, ‖A‖₂)."""
+
+    method: str
+    label: str
+    a_norm: float
+    statistic: str
+    ours: float
+    low: float
+    high: float
+    paper: float
+    outside: bool
+
+    @property
+    def z(self) -> float:
+        """Ours minus the paper's, in standard errors of the difference (:func:`gap_z`)."""
+        return gap_z(self.ours, self.paper, self.low, self.high)
+
+    @property
+    def within_noise(self) -> bool:
+        """Within instance-sampling noise: under :data:`_NOISE_Z` standard errors of the difference."""
+        return abs(self.z) < _NOISE_Z
+
+
+def _table1_groups(records):
+    records = as_records(records)
+    groups = records.group(lambda r: (r.method, r.label or r.method))
+    a_norms = sorted({_a_norm(r) for r in records if np.isfinite(_a_norm(r))})
+
+    def order(key):
+        method, label = key
+        return (_ROW_ORDER.index(method) if method in _ROW_ORDER else len(_ROW_ORDER), label)
+
+    return records, groups, a_norms, sorted(groups, key=order)
+
+
+def _cost_at(rows, method: str, a: float, linear: bool) -> _Cost:
+    good = [r for r in rows if _a_norm(r) == a and r.ok]
+    paper = None if linear else PAPER_TABLE1.get(method, {}).get(a)
+    return _Cost.of(np.array([r.cost for r in good], dtype=float), paper, PAPER_STATISTIC.get(method, "median"))
+
+
+def paper_values(records) -> list[PaperValue]:
+    """Every paper Table 1 value the records can be compared with, against our statistic and its 95 % interval.
+
+    In Table 1's row order, ‖A‖₂ ascending within a row; the linear ablations (no paper
+    value) are left out. ``outside``: the paper's value lies outside our interval.
+    """
+    records, groups, a_norms, keys = _table1_groups(records)
+    out = []
+    for method, label in keys:
+        rows = groups[(method, label)]
+        linear = any(r.params.get("activation") == "identity" for r in rows)
+        for a in a_norms:
+            cost = _cost_at(rows, method, a, linear)
+            if cost.paper and np.isfinite(cost.ours):
+                out.append(PaperValue(method, label, a, cost.statistic, cost.ours, cost.ours_low, cost.ours_high,
+                                      cost.paper, cost.outside))
+    return out
+
+
 def table1_markdown(records) -> str:
     """Markdown Table 1: our medians (and means where they differ) per (method, ‖A‖₂) beside the paper's value.
 
@@ -231,15 +312,9 @@ def table1_markdown(records) -> str:
     Below the table, every paper value outside our interval is listed with what
     is known to cause the gap (:data:`GAP_NOTES`).
     """
-    records = as_records(records)
-    groups = records.group(lambda r: (r.method, r.label or r.method))
-    a_norms = sorted({_a_norm(r) for r in records if np.isfinite(_a_norm(r))})
+    records, groups, a_norms, keys = _table1_groups(records)
     if not groups or not a_norms:
         return "_No records for Table 1._\n"
-
-    def order(key):
-        method, label = key
-        return (_ROW_ORDER.index(method) if method in _ROW_ORDER else len(_ROW_ORDER), label)
 
     header = ["Method"]
     for a in a_norms:
@@ -248,16 +323,14 @@ def table1_markdown(records) -> str:
     notes = []
     outside = []
     edge_gaps = []
-    for method, label in sorted(groups, key=order):
+    for method, label in keys:
         rows = groups[(method, label)]
         linear = any(r.params.get("activation") == "identity" for r in rows)
         cells = [label]
         for a in a_norms:
             here = [r for r in rows if _a_norm(r) == a]
             good = [r for r in here if r.ok]
-            paper = None if linear else PAPER_TABLE1.get(method, {}).get(a)
-            cost = _Cost.of(np.array([r.cost for r in good], dtype=float), paper,
-                            PAPER_STATISTIC.get(method, "median"))
+            cost = _cost_at(rows, method, a, linear)
             if cost.outside:
                 outside.append((method, label, a, cost))
             edges = PAPER_SPARSE_EDGES.get(a) if method == "grnn_sparse" and not linear else None
@@ -405,7 +478,7 @@ def training_curves_figure(records, ax=None, *, styles=None):
             name = f"{label} (‖A‖₂ = {a:g})" if shared else label
             axis.plot(steps, med, linestyle=norm_styles[i % len(norm_styles)] if shared else linestyle,
                       color=colour, marker=marker, markevery=_markevery(len(steps), k, len(curves[a])), markersize=5,
-                      label=f"{name}, {len(costs)} instances", gid=f"method:{label}")
+                      label=f"{name}, {len(costs)} instance{'' if len(costs) == 1 else 's'}", gid=f"method:{label}")
             axis.fill_between(steps, lo, hi, color=colour, alpha=0.15, linewidth=0)
             final_hi[id(axis)] = max(final_hi[id(axis)], float(hi[-1]))
         if not shared:

@@ -26,7 +26,7 @@ YARDSTICK = "best_pattern"
 
 def pattern_gaps(records) -> dict:
     """(panel, info model) -> (budgets, {label: median relative gaps per budget, NaN where no instance has one},
-    {label: instances compared}, starts_to_best values)."""
+    {label: instances compared}, starts_to_best values, {label: instances behind each budget's median})."""
     records = as_records(records)
     panels = instances_by_panel(records)
     out = {}
@@ -36,7 +36,7 @@ def pattern_gaps(records) -> dict:
         if not budgets.size:
             continue
         reference = best_within(floor, panels[panel], budgets)
-        medians, counts = {}, {}
+        medians, counts, per_budget = {}, {}, {}
         for (pnl, label), rs in sorted(records.by_panel_label.items()):
             if pnl != panel or rs[0].method == YARDSTICK or rs[0].info_model != info:
                 continue
@@ -46,9 +46,10 @@ def pattern_gaps(records) -> dict:
             medians[label] = np.array([np.median(gap[finite[:, k], k]) if finite[:, k].any() else np.nan
                                        for k in range(budgets.size)])
             counts[label] = int(finite.any(axis=1).sum())
+            per_budget[label] = finite.sum(axis=0).astype(int)
         starts = ([int(r.extras.get("starts_to_best", 0)) for r in floor if r.ok],
                   max(int(r.params.get("starts", 0)) for r in floor))
-        out[(panel, info)] = (budgets, medians, counts, starts)
+        out[(panel, info)] = (budgets, medians, counts, starts, per_budget)
     return out
 
 
@@ -60,8 +61,18 @@ def _pct(value: float) -> str:
     return f"{100 * value:+.2g} %".replace("-", "−")
 
 
+def _cell(value: float, instances: int, row: int) -> str:
+    """A gap, with the number of instances behind it where that is fewer than its row's ("+2.1 % (6)")."""
+    text = _pct(value)
+    return f"{text} ({instances})" if np.isfinite(value) and instances < row else text
+
+
 def pattern_gap_section(records) -> list[str]:
-    """Markdown: per panel and information model, each method's median gap to the best pattern at each budget."""
+    """Markdown: per panel and information model, each method's median gap to the best pattern at each budget.
+
+    A cell whose median rests on fewer instances than its row's count (the method has no
+    design within the budget on the others) gives its own count in parentheses.
+    """
     gaps = pattern_gaps(records)
     if not gaps:
         return []
@@ -71,21 +82,27 @@ def pattern_gap_section(records) -> list[str]:
              "it is not a certificate). Each cell is a method's median, over the instances, of its best cost "
              "within L links divided by that, minus 1. Static-gain heuristics of the same information model sit "
              "at or above 0; a dynamic or nonlinear controller may go below, by what its extra freedom buys.", ""]
-    for (panel, info), (budgets, medians, counts, starts) in sorted(gaps.items()):
+    for (panel, info), (budgets, medians, counts, starts, per_budget) in sorted(gaps.items()):
         if not medians:
             continue
         heads = [f"≤ {int(b)}" for b in budgets]
         lines += [f"### {panel_title(panel)}, {info} information", "",
                   "| method | instances | " + " | ".join(heads) + " |",
                   "|---|---:|" + "---:|" * len(budgets)]
+        fewer = False
         for label, values in medians.items():
             if not counts[label]:
                 continue  # no usable design on any instance (SLS on an infeasible graph)
-            lines.append(f"| {label} | {counts[label]} | " + " | ".join(_pct(v) for v in values) + " |")
+            row = counts[label]
+            cells = [_cell(v, k, row) for v, k in zip(values, per_budget[label])]
+            fewer |= any(c.endswith(")") for c in cells)
+            lines.append(f"| {label} | {row} | " + " | ".join(cells) + " |")
         reached, tried = starts
         note = (f"Starts per pattern: {tried}; the best value of every budget was reached by start "
                 f"{max(reached)} (median {int(np.median(reached))})" if reached else f"Starts per pattern: {tried}")
         if reached and max(reached) == tried:
             note += ": where that is the last start, more starts may still lower it"
-        lines += ["", note + ". — : no design within the budget.", ""]
+        counted = (" A count in parentheses: the median rests on that many instances, those where both the method "
+                   "and the best pattern have a design within the budget, fewer than the row's." if fewer else "")
+        lines += ["", note + ". — : no design within the budget." + counted, ""]
     return lines

@@ -11,8 +11,9 @@ cannot give: when one of its workers dies, every pending future fails with
   run by run, so that the failure lands on the run that caused it, recorded as a
   ``failed`` design whose message says what happened; a new worker takes the
   dead one's place;
-- a design that cannot be pickled fails its own run (checked in the worker, run by
-  run), not the sweep;
+- a design that cannot be pickled, or whose extras the store cannot hold, fails its
+  own run (checked in the worker, run by run: :func:`compare.execution.sendable_results`),
+  not the sweep;
 - workers die with the process that started them, however it ends: Linux's
   ``PR_SET_PDEATHSIG`` kills them when it dies (even by SIGKILL), a watchdog thread
   covers other platforms, and an idle worker exits when its pipe closes; they
@@ -56,19 +57,6 @@ def _watch_parent(parent_pid: int) -> None:
             os._exit(1)
 
 
-def _pickled(runs, results) -> list[bytes]:
-    """Each run's result pickled once, here; a run whose designs cannot be pickled gets a recorded failure."""
-    from .execution import unsendable
-
-    out = []
-    for run, result in zip(runs, results):
-        try:
-            out.append(pickle.dumps(result))
-        except Exception as exc:  # noqa: BLE001 - any pickling error is this run's fault
-            out.append(pickle.dumps(unsendable(run, result, exc)))
-    return out
-
-
 _HELD = {signal.SIGINT, signal.SIGTERM}
 
 
@@ -94,7 +82,7 @@ def _serve(conn, parent_pid: int) -> None:
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, _HELD)  # held while it was started
     _die_with_parent(parent_pid)
-    from .execution import WorkerSetupError, _limit_threads, execute_task
+    from .execution import WorkerSetupError, _limit_threads, execute_task_sendable
 
     _limit_threads()
     while True:
@@ -104,7 +92,7 @@ def _serve(conn, parent_pid: int) -> None:
             return
         conn.send(("started", task_id, None))
         try:
-            reply = ("done", task_id, _pickled(runs, execute_task(runs, plugins)))
+            reply = ("done", task_id, execute_task_sendable(runs, plugins))
         except WorkerSetupError as exc:
             reply = ("setup", task_id, str(exc))
         except BaseException as exc:  # noqa: BLE001 - whatever escaped the runs' own guards
@@ -175,6 +163,7 @@ class WorkerPool:
         self._idle: list[_Worker] = []
         self._busy: list[_Worker] = []
         self._next_id = 0
+        self._warned: dict = {}  # the workers' warnings already shown (warnings' registry)
 
     def __enter__(self):
         return self
@@ -195,7 +184,7 @@ class WorkerPool:
         ends a task (for progress). Raises :class:`compare.runner.WorkerSetupError`
         when a worker cannot load the experiment's methods.
         """
-        from .execution import WorkerSetupError
+        from .execution import WorkerSetupError, reissue_warnings
 
         queue = deque(tasks)
         while queue or self._busy:
@@ -227,8 +216,10 @@ class WorkerPool:
                         self._fail(runs, f"the task raised {payload}", now - started, queue, record)
                     else:
                         self._release(worker)
-                        for run, pickled in zip(runs, payload):
+                        results, caught = payload
+                        for run, pickled in zip(runs, results):
                             record(run, *pickle.loads(pickled))
+                        reissue_warnings(caught, self._warned)  # after recording: none lost to an "error" filter
                     if on_finish is not None:
                         on_finish(runs)
                 elif deadline is not None and now > deadline:

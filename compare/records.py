@@ -17,12 +17,43 @@ from functools import cached_property
 from types import MappingProxyType
 from typing import Any
 
-from codesign.status import USABLE
+from codesign.status import STATUSES, USABLE
 
-__all__ = ["InstanceRecord", "DesignRecord", "Records", "as_records", "canonical_key", "panel_key", "OK_STATUSES"]
+__all__ = ["InstanceRecord", "DesignRecord", "Records", "as_records", "canonical_key", "panel_key", "OK_STATUSES",
+           "row_problem"]
 
 #: Statuses of a design whose cost counts.
 OK_STATUSES = USABLE
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def row_problem(row: Mapping) -> str | None:
+    """What no stored design can hold in ``row`` (the store's columns, decoded), naming the field; None if nothing.
+
+    The values a :class:`codesign.Design` refuses or never writes: an unknown status,
+    a usable status (:data:`OK_STATUSES`) without a finite cost > 0, a negative count
+    of links or self-loops, a negative standard error or time. The store's rows and a
+    report folder's ``runs.csv`` rows are checked alike, so that neither a damaged store
+    nor a hand-edited file changes a report's findings unnoticed.
+    """
+    status = row.get("status")
+    if status not in STATUSES:
+        return f"status {status!r} is not a design status ({', '.join(STATUSES)})"
+    cost = row.get("cost")
+    if status in USABLE and not (_is_number(cost) and math.isfinite(cost) and cost > 0):
+        return f"cost {cost!r}: a design with status {status!r} has a finite cost > 0"
+    for name in ("links", "self_loops", "run_designs"):
+        value = row.get(name)
+        if value is not None and not (_is_number(value) and float(value).is_integer() and value >= 0):
+            return f"{name} {value!r} is not a count (a whole number >= 0)"
+    for name in ("cost_stderr", "seconds", "run_seconds", "run_peak_mb"):
+        value = row.get(name)  # NaN passes: a failed design's standard error is NaN
+        if value is not None and not (_is_number(value) and not value < 0):
+            return f"{name} {value!r} is not a number >= 0"
+    return None
 
 
 def canonical_key(mapping: Mapping) -> str:

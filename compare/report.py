@@ -28,6 +28,7 @@ from .cost_links import Point, aggregate, pareto_front, plot_cost_vs_links, quar
 from .figures import LINESTYLES, OFF_SCALE, drawn_styles, plot_budget_fronts  # noqa: E402
 from .meta import StoreMeta  # noqa: E402
 from .records import Records, as_records  # noqa: E402
+from .answer import answer_lines  # noqa: E402
 from .pattern_gaps import pattern_gap_section  # noqa: E402
 from .report_sections import delayed_section, experiments_with, learning_sections  # noqa: E402
 from .report_tables import (_asked_pairs, _budget_tables, _environment_lines, _fingerprint_lines, _paired_lines,  # noqa: E402
@@ -93,12 +94,19 @@ def plant_links(records) -> dict:
 
 
 def report_records(records) -> Records:
-    """The records as the report shows them: sorted, and one label per kind of design.
+    """The records as the report shows them: sorted, one label per kind of design, one name per method.
 
     ``sls_topologies`` runs SLS on several graphs under one label; the report gives each
     graph its own label ("SLS (plant graph, 1 hop/step)", ...), so that the infeasible
-    given graph, the plant graph and the complete-graph bound are never one row.
+    given graph, the plant graph and the complete-graph bound are never one row. A label
+    stored with the runs that only rewords the method's registered label ("Sparse K,
+    delayed (l1)" for "Sparse delayed K (l1)") becomes the registered label
+    (:func:`compare.report_tables.canonical_label`), so that a method has one name in
+    every report.
     """
+    from .report_tables import canonical_label, registered_labels
+
+    registry = registered_labels()
     out = []
     for r in as_records(records):
         if r.method == "sls_topologies" and "graph" in r.params:
@@ -106,6 +114,10 @@ def report_records(records) -> Records:
             speed = r.params.get("speed", 1.0)
             hop = "1 hop/step" if speed == 1.0 else f"{speed:g} hops/step"
             r = replace(r, label=f"SLS ({_GRAPH_NAMES.get(graph, graph + ' graph')}, {hop})")
+        else:
+            name = canonical_label(r.method, r.label, registry)
+            if name != r.label:
+                r = replace(r, label=name)
         out.append(r)
     return Records(sorted(out, key=lambda r: (r.instance.key, r.label, r.run_key, r.idx)))
 
@@ -221,12 +233,13 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     runs = {r.run_key for r in records}
     statuses = Counter(r.status for r in records)
     lines = [f"# {title}", ""]
+    lines += answer_lines(records, comparisons, meta=meta, members=members)
     if comparisons:
-        lines += findings_markdown(comparisons, excluded_total=len(unresolved(records)))
+        lines += findings_markdown(comparisons, excluded_total=len(unresolved(records)), records=records)
     lines += [
         "## What was compared", "",
-        f"{len(runs)} runs on {len(records.instances)} instances ({_panels_text(instances)}), {len(records)} designs "
-        f"by {len(records.by_label)} methods. Costs are E[J] / trace(P) over the horizon, so centralized LQR "
+        f"{_count(len(runs), 'run')} on {_count(len(records.instances), 'instance')} ({_panels_text(instances)}), "
+        f"{_count(len(records), 'design')} by {_count(len(records.by_label), 'method')}. Costs are E[J] / trace(P) over the horizon, so centralized LQR "
         "costs 1 and figures show the *excess cost* J − 1 over it (0.1 % = 0.001); links are directed "
         "off-diagonal communication links. Every method runs on the same instances, so methods are compared "
         "instance by instance. How it was computed, and how to rebuild it, is at the end.",
@@ -238,8 +251,10 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
             "## Best cost within a link budget", "", "![budget fronts](budget_fronts.png)", "",
             "For a budget of L links, each method's best cost on an instance is the lowest cost among its designs "
             "there with at most L directed off-diagonal links. The curve is the median of that over the instances "
-            "where the method has a design, from the budget at which every one of them has one (its marker); the "
-            "band is the 25–75 % range across those instances (their spread, not the uncertainty of the median). "
+            "the method ran on, an instance without a design within the budget counting as worse than any, so it "
+            "starts (at its marker) where more than half of them have one, and every point of it is reached on at "
+            "least half of them; these are the per-instance quantities the findings compare. The band is the "
+            "25–75 % range across those instances (their spread, not the uncertainty of the median). "
             "Line styles give the information model; designs closer to LQR than the axis reaches (LQR itself "
             "among them) sit on its bottom edge.", "",
         ]
@@ -248,14 +263,17 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     lines += pattern_gap_section(records)
     lines += delayed_section(records, save, styles, boundaries)
     lines += [
-        "## Cost against links per setting (paper Fig. 3 style)", "", "![cost versus links](cost_vs_links.png)", "",
-        "Each faint dot is one instance's design; each marker one method setting (one γ or β), at the median "
-        "link count of its designs (the lower median, a count some design has) and their median cost, drawn only "
-        "where at least one of its designs has no more links and no more cost, so that no marker stands where no "
-        "design is. Settings of one method are joined in its information model's line style ("
+        "## Cost against links", "", "![cost versus links](cost_vs_links.png)", "",
+        "Each faint dot is one instance's design, and each line a method's budget front, as above, in its "
+        "information model's line style ("
         + "; ".join(f"{v['linestyle']} {v['description']}" for v in INFO_STYLE.values())
-        + f"). Medians above {OFF_SCALE:g} × LQR are triangles on the top edge with their value; single-setting "
-        "methods that share a link count are shifted sideways by a few points so that neither hides.", "",
+        + "). Each marker is one method setting (one γ or β) as the paper's Fig. 3 draws it: the median link "
+        "count of its designs (the lower median, a count some design has) against their median cost. The two "
+        "medians are taken separately, not per instance, so a marker is drawn only where it lies on or above its "
+        "method's front at its link count: then at least half of the instances reach it (some design of the "
+        "method there has no more links and no more cost), and no marker stands below the front it summarizes"
+        + _hidden_settings_text(points) + f". Medians above {OFF_SCALE:g} × LQR are triangles on the top edge "
+        "with their value.", "",
     ]
     lines += _paired_lines(records, meta)
     lines += ["## Medians by method", ""]
@@ -288,18 +306,36 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
                               software=software, supports=supports, figures=drawn))
     files["md"] = out / "report.md"
     files["md"].write_text("\n".join(lines) + "\n")
-    interactive = {"cost_vs_links.png": figure_div(cost_links_figure(records, styles), "fig-cost-vs-links")}
+    interactive = {"cost_vs_links.png": figure_div(
+        cost_links_figure(records, styles, boundaries=boundaries, instances=instances), "fig-cost-vs-links")}
     if fronts:
-        interactive["budget_fronts.png"] = figure_div(budget_fronts_figure(fronts, styles), "fig-budget-fronts")
+        interactive["budget_fronts.png"] = figure_div(budget_fronts_figure(fronts, styles, boundaries=boundaries),
+                                                      "fig-budget-fronts")
     files["plotly.min.js"] = write_plotly_js(out)
     files["html"] = out / "report.html"
     files["html"].write_text(render_html(files["md"].read_text(), out, title, interactive))
     return files
 
 
+def _hidden_settings_text(points: list[Point]) -> str:
+    """How many settings' medians the figure leaves out because they lie below their method's front."""
+    usable = [p for p in points if p.ok]
+    hidden = [p for p in usable if not p.reached]
+    if not hidden:
+        return f" (all {len(usable)} settings here are)"
+    return (f"; {len(hidden)} of the {len(usable)} settings here are not, and have no marker (the medians table "
+            "below lists every setting)")
+
+
+def _count(k: int, noun: str) -> str:
+    """"1 run", "3 runs": a count in plain words."""
+    return f"{k} {noun}{'' if k == 1 else 's'}"
+
+
 def _panels_text(instances: dict) -> str:
     counts = sorted(set(instances.values()))
-    each = f"{counts[0]} per panel" if len(counts) == 1 else "per panel: " + ", ".join(map(str, counts))
+    each = (f"{counts[0]} instance{'s' if counts[0] != 1 else ''} per panel" if len(counts) == 1
+            else "instances per panel: " + ", ".join(map(str, counts)))
     return f"{len(instances)} panel{'s' if len(instances) != 1 else ''}, {each}"
 
 

@@ -124,8 +124,8 @@ def learning_sections(records: Records, save, styles: dict, load_controller, met
         fig, _ = training_curves_figure(curved, styles=styles)
         save(fig, "training_curves")
         lines += ["### Training curves (paper Fig. 2)", "", f"From experiment {', '.join(names)}: median and "
-                  f"25–75 % band over the {len(curved.instances)} instances of the selection-set cost during "
-                  "training.", "", "![training curves](training_curves.png)", ""]
+                  f"25–75 % band over the {len(curved.instances)} instance{'' if len(curved.instances) == 1 else 's'} "
+                  "of the selection-set cost during training.", "", "![training curves](training_curves.png)", ""]
     path, weight = topology_path(records, meta)
     if len(path) >= 2 and load_controller is not None:
         instance = path[0].instance

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import itertools
 import platform
+import re
 from collections import Counter, defaultdict
 from collections.abc import Mapping
 
@@ -17,13 +18,41 @@ from .cost_links import Point, pareto_front
 from .findings import UNCERTAIN_RSE, unresolved
 from .meta import StoreMeta
 from .records import OK_STATUSES, Records
-from .statistics import best_tables, covered_quantiles, paired_comparisons, panel_budgets, panel_title
+from .statistics import best_tables, front_quantiles, paired_comparisons, panel_budgets, panel_title
 
 _PACKAGES = ("grnn-codesign", "numpy", "scipy", "cvxpy", "clarabel", "scs", "control", "torch", "numba", "networkx",
              "matplotlib", "plotly")
 
 #: Said under every table that uses it.
 DASH_NOTE = "— : no usable design there."
+
+def _words(label: str) -> Counter:
+    """The words of a label, whatever their order, case and punctuation ("ℓ1" read as "l1")."""
+    return Counter(re.findall(r"[\w²³]+", label.replace("ℓ", "l").lower()))
+
+
+def canonical_label(method: str, label: str, registry: Mapping[str, str]) -> str:
+    """One name per method across reports: a label that is the method's registered label reworded.
+
+    Labels are stored with the runs, so a method can carry the name a spec once gave it
+    ("Sparse K, delayed (l1)") in one report and its registered label ("Sparse delayed K
+    (l1)") in another. A label with exactly the words of the method's registered label, in
+    any order, case or punctuation, becomes that label; any other label (one that names a
+    setting or a variant: "GRNN-Sparse (β path, 150 steps)", "Linear GRNN-Sparse") is kept.
+    """
+    name = registry.get(method)
+    return name if name and label != name and _words(label) == _words(name) else label
+
+
+def registered_labels() -> dict[str, str]:
+    """Method name -> the label it is registered with (built-ins and loaded plug-ins); empty if the registry
+    cannot be loaded."""
+    try:
+        from .registry import methods
+    except ImportError:  # pragma: no cover - a report without the method code installed
+        return {}
+    return {name: m.label for name, m in methods().items() if getattr(m, "label", None)}
+
 
 def software_versions() -> dict[str, str]:
     from .fingerprint import package_versions
@@ -117,16 +146,16 @@ def _budget_tables(records: Records) -> list[str]:
         grid = np.array([np.inf if b is None else b for b in budgets], dtype=float)
         rows = []
         for (_, label), best in best_tables(in_panel, grid).items():
-            cost, reached, covered = covered_quantiles(best)
+            cost, reached, covered = front_quantiles(best)
             ran = int((~np.isnan(best).all(axis=1)).sum())
-            text = [_fmt(m) if np.isfinite(m) else (f"{k} of {covered}" if k else "—") for m, k in zip(cost[1], reached)]
+            text = [_fmt(m) if np.isfinite(m) else (f"{k} of {ran}" if k else "—") for m, k in zip(cost[1], reached)]
             rows.append(f"| {label} | {covered} of {ran} | " + " | ".join(text) + " |")
         heads = [f"≤ {b} links" if b is not None else "any" for b in budgets]
         lines += [f"### {panel_title(panel)}", "", "| method | instances with a design | " + " | ".join(heads) + " |",
                   "|---|---:|" + "---:|" * len(budgets), *rows,
-                  "", "Median, over the instances where the method has a usable design, of its best cost within "
-                  "the budget, once every one of them has a design within it; before that, how many do "
-                  "(\"3 of 10\"). Budgets are 1, 3 and 7 links per node (20, 60 and 140 at the paper's N = 20). "
+                  "", "Median, over the instances the method ran on, of its best cost within the budget, an instance "
+                  "without a design within it counting as worse than any (as the figure draws it); where half "
+                  "of them or fewer have one, how many do (\"3 of 10\"). Budgets are 1, 3 and 7 links per node (20, 60 and 140 at the paper's N = 20). "
                   + DASH_NOTE, ""]
     return lines
 
@@ -208,9 +237,9 @@ def _precision_text(records: Records) -> str:
     refined = sum(r.extras.get("importance_draws", 0) > 0 for r in simulated)
     if refined:
         most = max(r.extras.get("importance_draws", 0) for r in simulated)
-        how += f"; {refined} heavy-tailed costs re-estimated on up to {most:,} importance-sampled draws of their own"
+        how += f"; {refined} heavy-tailed cost{'s' if refined != 1 else ''} re-estimated on up to {most:,} importance-sampled draws of their own"
     text = (f" ({how}; relative standard error: median {np.median(rel):.3%}, largest {max(rel):.3%} over "
-            f"{len(rel)} simulated designs")
+            f"{len(rel)} simulated design{'' if len(rel) == 1 else 's'}")
     if plain:
         text += (f"; the estimate without control variates, kept in the `extras` column of `runs.csv` as `plain_cost` and `plain_cost_stderr`, has a median of "
                  f"{np.median(plain):.2%}")
@@ -224,7 +253,9 @@ def _uncertain_text(records: Records) -> str:
         return ""
     where = "; ".join(f"{len(rs)} of {label} on {panel_title(panel)}"
                       for (panel, label), rs in sorted(uncertain.by_panel_label.items()))
-    return (f" {len(uncertain)} simulated costs keep a relative standard error above {UNCERTAIN_RSE:.0%} even so "
+    k = len(uncertain)
+    return (f" {k} simulated cost{'' if k == 1 else 's'} keep{'s' if k == 1 else ''} a relative standard error above "
+            f"{UNCERTAIN_RSE:.0%} even so "
             f"({where}). Such a cost is dominated by rare initial states from which the closed loop diverges "
             "within the horizon (the GRNN's and the GCNN's inputs pass through tanh and are bounded, so on an "
             "unstable plant their region of attraction is bounded too); draws that rare are hardly ever "

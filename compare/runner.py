@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing
+import pickle
 import time
 import uuid
 from collections import Counter
@@ -31,8 +32,11 @@ from .execution import (  # noqa: F401 - re-exported: the runner's public names
     build_instance,
     execute_run,
     execute_task,
+    execute_task_sendable,
     failed_run,
     instance_facts,
+    reissue_warnings,
+    sendable_results,
 )
 from .fingerprint import fingerprint_details
 from .meta import MetaKind, meta_key
@@ -164,17 +168,22 @@ def _drain(pool: Executor, tasks: list[list[Run]], plugins, record) -> None:
 
     A task whose future fails (its results would not unpickle, its worker died) is
     recorded as failed, run by run; a worker that cannot load the methods stops all.
-    Per-run time limits need the local :class:`~compare.pool.WorkerPool`.
+    Results travel pickled by the worker (:func:`compare.execution.sendable_results`), so
+    that a design which cannot be serialized is its run's failure, not a task the
+    executor retries for ever. Per-run time limits need the local
+    :class:`~compare.pool.WorkerPool`.
     """
-    futures = {pool.submit(execute_task, task, plugins): task for task in tasks}
+    futures = {pool.submit(execute_task_sendable, task, plugins): task for task in tasks}
+    warned: dict = {}
     try:
         remaining = set(futures)
         while remaining:
             finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
             for future in finished:
-                task = futures[future]
+                task, caught = futures[future], []
                 try:
-                    results = future.result()
+                    sent, caught = future.result()
+                    results = [pickle.loads(result) for result in sent]
                 except WorkerSetupError:
                     raise
                 except Exception as exc:  # noqa: BLE001 - the executor's failure is these runs' status
@@ -182,34 +191,53 @@ def _drain(pool: Executor, tasks: list[list[Run]], plugins, record) -> None:
                     results = [(failed_run(run, message), 0.0, None) for run in task]
                 for run, result in zip(task, results):
                     record(run, *result)
+                reissue_warnings(caught, warned)  # after recording: a warning filtered to "error" loses no run
     except BaseException:
         for future in futures:
             future.cancel()
         raise
 
 
-def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store) -> None:
-    """Store what the report needs beside the runs: the spec, methods, fingerprints and instance facts."""
-    store.set_meta(meta_key(MetaKind.SPEC, spec.name), spec.source)
-    store.set_meta(meta_key(MetaKind.SECTIONS, spec.name), list(spec.sections))
-    store.set_meta(meta_key(MetaKind.PAIRS, spec.name), [list(pair) for pair in spec.pairs])
-    store.set_members(spec.name, [run.key for run in runs])
+#: Instance facts written per transaction while planning: few commits, and an interrupted plan keeps its batches.
+PLAN_BATCH = 1000
+
+
+def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store, progress: bool = False) -> None:
+    """Store what the report needs beside the runs: the spec, methods, fingerprints and instance facts.
+
+    Each instance is built once here, in this process, for its facts (a few ms each at
+    small sizes); a bar shows it when that takes more than a couple of seconds, and the
+    facts are written :data:`PLAN_BATCH` instances per transaction, not one commit each.
+    """
+    entries = {meta_key(MetaKind.SPEC, spec.name): spec.source,
+               meta_key(MetaKind.SECTIONS, spec.name): list(spec.sections),
+               meta_key(MetaKind.PAIRS, spec.name): [list(pair) for pair in spec.pairs]}
     for name in dict.fromkeys(run.method for run in runs):
         m = get_method(name)
         details = fingerprint_details(m.modules)
-        store.set_meta(meta_key(MetaKind.METHOD, name), {
+        entries[meta_key(MetaKind.METHOD, name)] = {
             "label": m.label, "summary": m.summary, "produces": list(m.produces), "path_param": m.path_param,
-            "fingerprint": details["fingerprint"]})
-        store.set_meta(meta_key(MetaKind.FINGERPRINT, details["fingerprint"]),
-                       {"modules": details["modules"], "versions": details["versions"]})
+            "fingerprint": details["fingerprint"]}
+        entries[meta_key(MetaKind.FINGERPRINT, details["fingerprint"])] = {
+            "modules": details["modules"], "versions": details["versions"]}
+    store.set_metas(entries)
+    store.set_members(spec.name, [run.key for run in runs])
     known = store.instance_facts()
-    for key, spec_dict in {canonical_key(run.instance): run.instance for run in runs}.items():
-        if "radius" not in known.get(key, {}):  # new, or stored before the systems table's facts
+    # "radius" missing: new, or stored before the systems table's facts.
+    todo = [spec_dict for key, spec_dict in {canonical_key(run.instance): run.instance for run in runs}.items()
+            if "radius" not in known.get(key, {})]
+    batch = []
+    with tqdm(todo, desc=f"{spec.name}: planning", unit="instance", disable=not progress, delay=2.0) as bar:
+        for spec_dict in bar:
             try:
-                facts = instance_facts(build_instance(spec_dict))
+                batch.append((spec_dict, instance_facts(build_instance(spec_dict))))
             except Exception:  # the instance's runs record the failure; the report draws without its facts
-                continue
-            store.set_instance_facts(spec_dict, facts)
+                pass
+            if len(batch) >= PLAN_BATCH:
+                store.set_metas(store.instance_facts_entries(batch))
+                batch = []
+    if batch:
+        store.set_metas(store.instance_facts_entries(batch))
 
 
 def run_experiment(
@@ -246,7 +274,7 @@ def run_experiment(
     """
     start = time.perf_counter()
     runs = list({run.key: run for run in spec.runs()}.values())
-    _record_meta(spec, runs, store)
+    _record_meta(spec, runs, store, progress)
     limits = store.timed_out()
     # A run stored as stopped at its time limit is tried again when the spec now gives it longer.
     store.forget(run.key for run in runs if run.key in limits
@@ -254,6 +282,7 @@ def run_experiment(
     done = store.done_keys()
     pending = [run for run in runs if run.key not in done]
     store.relabel({run.key: run.label for run in runs if run.key in done})
+    store.redescribe({run.key: run.instance for run in runs if run.key in done})
     summary = RunSummary(total=len(runs), already_stored=len(runs) - len(pending))
     bar = tqdm(total=len(pending), desc=f"{spec.name}", unit="run", disable=not progress or not pending)
     owner = uuid.uuid4().hex
@@ -283,8 +312,9 @@ def run_experiment(
         if executor is None and workers <= 1:
             for task in tasks:
                 show(task, 1)
-                for run, result in zip(task, execute_task(task)):
-                    record(run, *result)
+                # Through pickle as in a worker: a design that could not leave one fails here too.
+                for run, result in zip(task, sendable_results(task, execute_task(task))):
+                    record(run, *pickle.loads(result))
                 show(task, -1)
         elif isinstance(executor, (Executor, WorkerPool)):
             drain(executor, tasks)

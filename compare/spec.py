@@ -8,6 +8,7 @@ their hyperparameters and grids, and evaluation settings. It expands into
     description = "..."
     plugins = ["my_methods", "more_methods.py"]   # optional: modules registering methods (top level,
                                                   # before any [table], or TOML reads it as a table key)
+    max_instances = 50000        # optional (top level): the most instances planned, MAX_INSTANCES by default
 
     [instances]
     family = "paper"
@@ -87,6 +88,11 @@ _NAME = re.compile(r"[\w-][\w.-]*")
 #: ``solve_discrete_are``: a 3n x 3n matrix pencil and its QZ factors, about 34), rounded up.
 #: Instances whose estimate exceeds the machine's memory are refused when a spec is loaded.
 DENSE_MATRICES = 48
+
+#: The most instances an experiment plans unless its spec sets ``max_instances``: planning builds
+#: each instance once in the main process (about 3-4 ms each at small sizes) and stores about 1 KB
+#: of facts for it, so 50,000 take about 3 minutes and 50 MB before the first run.
+MAX_INSTANCES = 50_000
 
 
 class SpecError(ValueError):
@@ -247,7 +253,8 @@ def _read_text(path: Path) -> str:
     except OSError as exc:
         raise SpecError(f"cannot read spec file {path}: {exc.strerror or exc}") from None
     try:
-        text = data.decode("utf-8")
+        # utf-8-sig: Windows editors (Notepad, "UTF-8 with BOM") start the file with a byte-order mark.
+        text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise SpecError(f"{path} is not a text TOML file (byte 0x{data[exc.start]:02x} at offset {exc.start} "
                         "is not UTF-8)") from None
@@ -269,7 +276,7 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(f"spec is not valid TOML: {exc}") from None
     _check_keys("spec", data, {"name", "description", "instances", "methods", "evaluation", "plugins", "report",
-                               "timeout"})
+                               "timeout", "max_instances"})
     refs = [("--plugin", ref) for ref in plugins]
     raw_plugins = data.get("plugins", [])
     if not isinstance(raw_plugins, list):
@@ -288,7 +295,11 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
     description = _typed("description", data.get("description", ""), str)
     if "instances" not in data:
         raise SpecError("spec: missing [instances] table")
-    instances = _parse_instances(_typed("instances", data["instances"], (dict, list)), base)
+    limit = _typed("max_instances", data.get("max_instances", MAX_INSTANCES), int)
+    if limit < 1:
+        raise SpecError(f"max_instances: must be >= 1, got {limit}")
+    instances = _parse_instances(_typed("instances", data["instances"], (dict, list)), base,
+                                 (limit, "max_instances" in data))
     evaluation = _parse_evaluation(_typed("evaluation", data.get("evaluation", {}), dict))
     raw_methods = _typed("methods", data.get("methods", []), list)
     if not raw_methods:
@@ -298,6 +309,7 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
     fields = {"family"}.union(*(get_family(name).fields for name in instances.families))
     timeout = _parse_timeout("timeout", data.get("timeout"))
     methods = tuple(_parse_method(i, entry, base, loaded, fields, timeout) for i, entry in enumerate(raw_methods))
+    _check_where(methods, instances.expand(), name)
     _check_pairs(pairs, methods)
     return ExperimentSpec(name, description, instances, methods, evaluation, text, tuple(loaded), sections, pairs)
 
@@ -310,6 +322,37 @@ def _check_name(name: str, *, given: bool) -> str:
     if given:
         raise SpecError(f"name: must be {rule}, got {name!r}")
     raise SpecError(f"name: the spec file's name {name!r} is not {rule}; set name = \"...\" in the spec")
+
+
+def _values_text(values) -> str:
+    """The distinct values, as Python writes them, numbers in order (by repr: a value may not hash)."""
+    distinct = {repr(v): v for v in values}
+
+    def order(text):
+        value = distinct[text]
+        number = isinstance(value, (int, float)) and not isinstance(value, bool) and value == value
+        return (0, value, "") if number else (1, 0, text)
+
+    return ", ".join(sorted(distinct, key=order))
+
+
+def _check_where(methods: tuple, instances: list[dict], experiment: str) -> None:
+    """Every method entry's ``where`` selects at least one instance; else name the key and what it takes.
+
+    A value of the wrong type (``["0.995"]``, a string where the field holds numbers) matches
+    nothing, and the entry would otherwise be dropped without a word.
+    """
+    for i, m in enumerate(methods):
+        if not m.where or any(m.applies_to(instance) for instance in instances):
+            continue
+        given = " and ".join(f"{key} = {values!r}" for key, values in m.where.items())
+        taken = {key: [inst[key] for inst in instances if key in inst] for key in m.where}
+        unmatched = [key for key, values in m.where.items() if not any(v in values for v in taken[key])]
+        # Name the key that matches nothing; if each matches some instance, it is their combination.
+        shown = unmatched or list(m.where)
+        takes = "; ".join(f"{key} takes {_values_text(taken[key])}" if taken[key] else f"no instance has {key}"
+                          for key in shown)
+        raise SpecError(f"methods[{i}].where: {given} matches no instance of experiment {experiment}; {takes}")
 
 
 def _check_pairs(pairs: tuple, methods: tuple) -> None:
@@ -367,8 +410,11 @@ def _list_of(where: str, value, kind, *, positive: bool = True) -> tuple:
     return out
 
 
-def _parse_instances(table, base) -> InstanceSpec:
-    """One ``[instances]`` table, or a list of them (``[[instances]]``: several families)."""
+def _parse_instances(table, base, limit: tuple = (MAX_INSTANCES, False)) -> InstanceSpec:
+    """One ``[instances]`` table, or a list of them (``[[instances]]``: several families).
+
+    ``limit`` is the most instances allowed and whether the spec set it (:func:`_check_count`).
+    """
     from .families import UnknownFamilyError, get_family
 
     tables = [table] if isinstance(table, dict) else table
@@ -385,9 +431,22 @@ def _parse_instances(table, base) -> InstanceSpec:
             raise SpecError(f"{where}.family: {exc}") from None
         names.append(name)
         parsed = family.parse(entry, base)
+        _check_count(where, len(specs) + len(parsed), *limit)
         _check_memory(where, family, parsed)
         specs.extend(parsed)
     return InstanceSpec(families=tuple(dict.fromkeys(names)), specs=tuple(specs))
+
+
+def _check_count(where: str, count: int, limit: int, given: bool) -> None:
+    """Refuse more instances than ``limit`` before any is built (planning builds each one, see :data:`MAX_INSTANCES`)."""
+    if count <= limit:
+        return
+    if given:
+        raise SpecError(f"{where}: {count} instances, more than max_instances = {limit}; raise max_instances "
+                        "(a top-level key) to plan them all")
+    raise SpecError(f"{where}: {count} instances, more than the {limit} an experiment plans by default (each is "
+                    f"built once while planning, about 3 ms and 1 KB of store each); set max_instances = {count} "
+                    "at the top of the spec to plan them all")
 
 
 def _machine_memory() -> int | None:

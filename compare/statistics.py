@@ -3,8 +3,11 @@
 A method's *best cost within a budget* L on an instance is the lowest cost among
 its designs there with at most L directed off-diagonal links (infinite when none
 fits, or when the method failed there). Its budget front is the median over the
-instances where it has a design of that best cost as a step function of L, with
-the 25–75 % band, from the budget at which every one of them has a design.
+instances it ran on of that best cost as a step function of L, with the 25–75 %
+band: an instance without a design within L counts as worse than any design, so
+the median is finite exactly where more than half of the instances have one, and
+every point of a front is reached (some design with no more links and no more
+cost) on at least half of them.
 
 Paired comparisons take the per-instance difference of two methods' best costs
 within the same budget, on the instances where both have a design that fits:
@@ -23,7 +26,7 @@ from scipy import stats
 from .records import OK_STATUSES, as_records, panel_key
 
 __all__ = ["Front", "budget_fronts", "best_within", "best_tables", "Paired", "paired_difference", "median_interval",
-           "paired_comparisons", "instances_by_panel", "covered_quantiles", "panel_key", "panel_title", "OK_STATUSES",
+           "paired_comparisons", "instances_by_panel", "front_quantiles", "panel_key", "panel_title", "OK_STATUSES",
            "panel_budgets", "panel_nodes", "BUDGETS_PER_NODE"]
 
 # Quantiles of values that may be infinite: replace inf by a huge sentinel, so that a
@@ -57,13 +60,14 @@ def _quantiles(values) -> np.ndarray:
 class Front:
     """A method's budget front on one panel: step function of the link budget.
 
-    ``cost[:, k]`` holds the (25 %, median, 75 %), over the ``covered`` instances on
-    which the method has at least one usable design, of the best cost within
-    ``budgets[k]`` links; it holds from ``budgets[k]`` up to the next budget. It is
-    ``inf`` until every one of those instances has a design within the budget
-    (``reached[k] == covered``), so that a front never starts with a jump made by
-    instances arriving one by one. ``instances`` counts the instances the method ran
-    on (``covered`` fewer where it failed on some).
+    ``cost[:, k]`` holds the (25 %, median, 75 %), over the ``instances`` the method
+    ran on, of the best cost within ``budgets[k]`` links, an instance without a design
+    within the budget (or without any usable design) counting as ``inf``; it holds
+    from ``budgets[k]`` up to the next budget. The median is finite exactly where more
+    than half of those instances have a design within the budget, so that a drawn
+    point is one that at least half of them reach (:func:`front_quantiles`).
+    ``reached[k]`` counts the instances with a design within ``budgets[k]``;
+    ``covered`` those with a usable design at all.
     """
 
     panel: tuple
@@ -84,7 +88,7 @@ class Front:
 
     @property
     def start(self) -> float | None:
-        """The smallest budget at which every covered instance has a design (None if never)."""
+        """The smallest budget at which the median is finite (None if never)."""
         defined = np.isfinite(self.cost[1])
         return float(self.budgets[int(np.argmax(defined))]) if defined.any() else None
 
@@ -126,26 +130,28 @@ def budget_fronts(records) -> list[Front]:
     fronts = []
     for (panel, label), rs in sorted(records.by_panel_label.items()):
         budgets = np.unique([0.0] + [float(r.links) for r in rs if r.ok])
-        cost, reached, covered = covered_quantiles(best_within(rs, panels[panel], budgets))
+        cost, reached, covered = front_quantiles(best_within(rs, panels[panel], budgets))
         info = Counter(r.info_model for r in rs).most_common(1)[0][0]
         fronts.append(Front(panel, label, info, budgets, cost, len(rs.by_instance), covered, reached))
     return fronts
 
 
-def covered_quantiles(best) -> tuple[np.ndarray, np.ndarray, int]:
-    """Quartiles of best costs (instances x budgets) over the instances with any design, where all have one.
+def front_quantiles(best) -> tuple[np.ndarray, np.ndarray, int]:
+    """Quartiles of best costs (instances x budgets) over the instances run on, no design counting as ``inf``.
 
-    Returns ``(cost, reached, covered)``: ``cost[:, k]`` the (25 %, median, 75 %) over
-    the ``covered`` instances with a usable design at some budget, ``inf`` unless all
-    of them have one within budget ``k``; ``reached[k]`` how many do. Rows of NaN
-    (instances the method did not run on) are left out.
+    Returns ``(cost, reached, covered)``: ``cost[:, k]`` the (25 %, median, 75 %) of
+    column ``k``, ``inf`` where that quantile falls on or between instances without a
+    design within the budget (the median is finite only where more than half have
+    one); ``reached[k]`` how many instances have a design within budget ``k``;
+    ``covered`` how many have a usable design at all. Rows of NaN (instances the
+    method did not run on) are left out.
     """
     best = np.asarray(best, dtype=float)
-    covered = best[np.isfinite(best).any(axis=1)]
-    reached = np.isfinite(covered).sum(axis=0)
-    cost = _quantiles(covered) if len(covered) else np.full((3, best.shape[1]), np.inf)
-    cost[:, reached < len(covered)] = np.inf
-    return cost, reached, len(covered)
+    ran = best[~np.isnan(best).all(axis=1)] if best.ndim == 2 else best
+    reached = np.isfinite(ran).sum(axis=0)
+    covered = int(np.isfinite(ran).any(axis=1).sum())
+    cost = _quantiles(ran) if len(ran) else np.full((3, best.shape[1]), np.inf)
+    return cost, reached, covered
 
 
 def median_interval(differences, confidence: float = 0.95) -> tuple[float, float, float]:
@@ -224,11 +230,16 @@ def panel_nodes(records) -> int | None:
 
 
 def panel_budgets(records) -> tuple:
-    """One panel's link budgets: :data:`BUDGETS_PER_NODE` times its node count, then None (any number)."""
+    """One panel's link budgets: :data:`BUDGETS_PER_NODE` times its node count, then None (any number).
+
+    A budget of N(N − 1) links or more allows every link, so it is "any" under another
+    name: such tiers are left out (at N = 4, 4 links, then any: 12 and 28 links would
+    repeat "any" and count one comparison three times in Holm's correction).
+    """
     n = panel_nodes(records)
     if n is None:
         return (20, 60, 140, None)
-    return tuple(k * n for k in BUDGETS_PER_NODE) + (None,)
+    return tuple(k * n for k in BUDGETS_PER_NODE if k * n < n * (n - 1)) + (None,)
 
 
 def paired_comparisons(records, reference: str, budgets=None, others=None) -> dict:

@@ -14,6 +14,7 @@ are taken over.
 
 from __future__ import annotations
 
+import functools
 import io
 import json
 import os
@@ -28,7 +29,7 @@ from codesign.controllers import controller_from_arrays
 from codesign.status import FAILED
 
 from .meta import MetaKind, entries_of, meta_key
-from .records import Records, canonical_key
+from .records import Records, canonical_key, row_problem
 
 __all__ = ["Store", "StoreError", "APPLICATION_ID", "SCHEMA_VERSION"]
 
@@ -110,15 +111,45 @@ class StoreError(RuntimeError):
     """The store file is unreadable or not a result store."""
 
 
+def _read_only_uri(path: Path) -> str:
+    """An SQLite URI that opens ``path`` for reading without creating or changing any file.
+
+    ``mode=ro`` alone still creates ``-wal`` and ``-shm`` files beside a database in WAL
+    mode (and leaves them there); when no such files exist, no process has it open in
+    WAL mode, so ``immutable=1`` (no locks, no side files) reads it safely. Otherwise
+    ``mode=ro`` takes the shared lock that keeps a read consistent while another
+    ``compare run`` writes.
+    """
+    uri = f"{path.resolve().as_uri()}?mode=ro"
+    try:
+        with path.open("rb") as handle:
+            header = handle.read(20)
+    except OSError:
+        return uri  # sqlite3 says why it cannot open it
+    wal_mode = header.startswith(b"SQLite format 3\x00") and header[18:19] == b"\x02"
+    side_files = any(path.with_name(path.name + suffix).exists() for suffix in ("-wal", "-shm"))
+    return uri + "&immutable=1" if wal_mode and not side_files else uri
+
+
+def _damage(conn: sqlite3.Connection) -> str | None:
+    """SQLite's first complaint about the file's pages (``PRAGMA quick_check``), None if it finds none."""
+    found = [row[0] for row in conn.execute("PRAGMA quick_check(2)")]
+    if found == ["ok"]:
+        return None
+    lines = [line for text in found for line in text.splitlines() if line.strip() and not line.startswith("***")]
+    return lines[0] if lines else "; ".join(found)
+
+
 def _inspect(path: Path) -> int:
     """The schema version of the store at ``path``, read without writing a byte; StoreError if not a store.
 
     A file marked with :data:`APPLICATION_ID` gives its ``user_version``; an unmarked one is a
     store only if its tables are exactly a (pre-mark) store's, version 1. Anything else (another
-    program's database, a newer store, not SQLite at all) is refused before it is opened for writing.
+    program's database, a newer store, not SQLite at all, a damaged file) is refused before it is
+    opened for writing.
     """
     try:
-        conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=30)
+        conn = sqlite3.connect(_read_only_uri(path), uri=True, timeout=30)
     except sqlite3.Error as exc:
         raise StoreError(_explain(path, exc)) from None
     try:
@@ -126,11 +157,16 @@ def _inspect(path: Path) -> int:
         version = conn.execute("PRAGMA user_version").fetchone()[0]
         tables = {row[0] for row in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         columns = {t: [row[1] for row in conn.execute(f"PRAGMA table_info({t})")] for t in tables & {"runs", "designs"}}
+        # Damage (a disk error, a partial copy) is found here, before a writer touches the file:
+        # otherwise the first query that reaches a bad page fails after the run has written into it.
+        damage = _damage(conn) if app_id == APPLICATION_ID or {"runs", "designs"} <= tables else None
     except sqlite3.DatabaseError as exc:
         raise StoreError(_explain(path, exc)) from None
     finally:
         conn.close()
     untouched = "; it was left untouched"
+    if damage is not None:
+        raise StoreError(_damaged(path, damage))
     if app_id == APPLICATION_ID:
         if version > SCHEMA_VERSION:
             raise StoreError(f"{path} is a result store of a newer version of this toolkit (schema {version}; "
@@ -148,8 +184,11 @@ def _inspect(path: Path) -> int:
     return 1
 
 
-def _explain(path: Path, exc: sqlite3.Error) -> str:
-    """A one-line reason for an SQLite error on opening ``path``: locked, unwritable, or not a store."""
+def _explain(path: Path, exc: sqlite3.Error, *, opening: bool = True) -> str:
+    """A one-line reason for an SQLite error on ``path``: locked, unwritable, damaged, or not a store.
+
+    ``opening`` False: the error came from a store already open (the file may have been written).
+    """
     text = str(exc)
     if "locked" in text or "busy" in text:
         return f"the result store {path} is locked by another process (still writing after 30 s); try again later"
@@ -160,7 +199,34 @@ def _explain(path: Path, exc: sqlite3.Error) -> str:
         if folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK):
             return f"cannot create the result store {path}: the folder {folder} is not writable"
         return f"cannot open the result store {path}: {text}"
+    if "malformed" in text or "corrupt" in text:
+        return _damaged(path, text, untouched=opening)
+    if not opening:
+        return f"the result store {path} cannot be read or written: {text}"
     return f"{path} is not a usable result store: {text}; it was left untouched"
+
+
+def _damaged(path: Path, problem: str, *, untouched: bool = True) -> str:
+    kept = "; it was left untouched" if untouched else ""
+    return f"the result store {path} is damaged ({problem}){kept}: restore it from a copy, or give another store"
+
+
+def _guarded(method):
+    """Turn an SQLite error inside a store method into a :class:`StoreError` naming the file.
+
+    A store can be damaged after it was opened (a disk fault, another program writing
+    into it); the caller then gets the project's one error type, not ``sqlite3``'s.
+    A write that fails is rolled back by its transaction.
+    """
+    @functools.wraps(method)
+    def guarded(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except sqlite3.ProgrammingError:  # a misuse of the store (closed, another thread's): a bug, not the file
+            raise
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(_explain(self.path, exc, opening=False)) from None
+    return guarded
 
 
 def _npz(arrays: dict) -> bytes:
@@ -231,18 +297,31 @@ class Store:
         self.close()
 
     # -- writing ----------------------------------------------------------------
+    @_guarded
     def set_meta(self, key: str, value) -> None:
+        self.set_metas({key: value})
+
+    @_guarded
+    def set_metas(self, entries: dict) -> None:
+        """Set several meta entries (key -> JSON value) in one transaction."""
         with self._conn:
-            self._conn.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, json.dumps(value, sort_keys=True)))
+            self._conn.executemany("INSERT OR REPLACE INTO meta VALUES (?, ?)",
+                                   [(key, json.dumps(value, sort_keys=True)) for key, value in entries.items()])
 
     def set_instance_facts(self, instance_spec: dict, facts: dict) -> None:
         """Store what a report needs to know about an instance (:func:`compare.runner.instance_facts`)."""
-        self.set_meta(meta_key(MetaKind.INSTANCE, canonical_key(instance_spec)), facts)
+        self.set_metas(self.instance_facts_entries([(instance_spec, facts)]))
+
+    @staticmethod
+    def instance_facts_entries(items) -> dict:
+        """The meta entries of ``(instance spec, facts)`` pairs, for :meth:`set_metas` (several in one transaction)."""
+        return {meta_key(MetaKind.INSTANCE, canonical_key(spec)): facts for spec, facts in items}
 
     def instance_facts(self) -> dict[str, dict]:
         """Instance key (:func:`compare.records.canonical_key` of its spec) -> its stored facts."""
         return entries_of(self.meta(), MetaKind.INSTANCE)
 
+    @_guarded
     def set_members(self, experiment: str, keys) -> None:
         """Record which runs make up an experiment now (a run may belong to several).
 
@@ -253,6 +332,7 @@ class Store:
             self._conn.execute("DELETE FROM members WHERE experiment = ?", (experiment,))
             self._conn.executemany("INSERT OR IGNORE INTO members VALUES (?, ?)", [(experiment, k) for k in keys])
 
+    @_guarded
     def claim(self, keys, owner: str) -> list[str]:
         """Claim the runs among ``keys`` that are neither stored nor claimed by a live process.
 
@@ -274,15 +354,18 @@ class Store:
                                    [(k, owner, host, pid, now) for k in mine])
         return mine
 
+    @_guarded
     def claims(self) -> dict[str, tuple[str, str, int]]:
         """Runs claimed and not yet stored: ``run_key -> (owner, host, pid)``."""
         return {k: (o, h, p) for k, o, h, p in self._conn.execute("SELECT run_key, owner, host, pid FROM claims")}
 
+    @_guarded
     def release(self, owner: str) -> None:
         """Drop ``owner``'s remaining claims (runs it did not finish)."""
         with self._conn:
             self._conn.execute("DELETE FROM claims WHERE owner = ?", (owner,))
 
+    @_guarded
     def add_run(self, run, designs, *, experiment: str, seconds: float, peak_mb: float | None = None,
                 owner: str | None = None) -> bool:
         """Store a finished run and its designs atomically; False if it was already stored.
@@ -322,6 +405,7 @@ class Store:
                 self._conn.execute("UPDATE claims SET heartbeat = ? WHERE owner = ?", (time.time(), owner))
         return True
 
+    @_guarded
     def timed_out(self) -> dict[str, float]:
         """Stored runs that stopped at their time limit: ``run_key -> limit`` in seconds."""
         out = {}
@@ -332,6 +416,7 @@ class Store:
                 out[key] = float(limit)
         return out
 
+    @_guarded
     def forget(self, keys) -> int:
         """Delete stored runs and their designs (one transaction); returns how many were stored.
 
@@ -343,6 +428,7 @@ class Store:
             removed = sum(self._conn.execute("DELETE FROM runs WHERE run_key = ?", (k,)).rowcount for k in keys)
         return removed
 
+    @_guarded
     def relabel(self, labels: dict[str, str]) -> int:
         """Set the legend label of stored runs (``run_key -> label``); returns how many changed.
 
@@ -358,13 +444,31 @@ class Store:
                     changed += 1
         return changed
 
+    @_guarded
+    def redescribe(self, instances: dict[str, dict]) -> int:
+        """Set the instance spec stored with runs (``run_key -> spec``); returns how many changed.
+
+        A run's key hashes its family's identity of the instance, not always all of the
+        spec: a ``matrices`` file renamed or moved keeps its runs (their key is the file's
+        contents), and this gives them its new ``name`` and ``file``, so that reports,
+        exports and ``where`` agree on the name.
+        """
+        rows = [(json.dumps(spec, sort_keys=True), key) for key, spec in instances.items()]
+        with self._conn:
+            before = self._conn.total_changes
+            self._conn.executemany("UPDATE runs SET instance = ?1 WHERE run_key = ?2 AND instance != ?1", rows)
+            return self._conn.total_changes - before
+
     # -- reading ----------------------------------------------------------------
+    @_guarded
     def done_keys(self) -> set[str]:
         return {row[0] for row in self._conn.execute("SELECT run_key FROM runs")}
 
+    @_guarded
     def meta(self) -> dict:
         return {k: json.loads(v) for k, v in self._conn.execute("SELECT key, value FROM meta")}
 
+    @_guarded
     def members(self) -> dict[str, set]:
         """Experiment name -> the run keys that make it up."""
         out: dict[str, set] = {}
@@ -372,15 +476,18 @@ class Store:
             out.setdefault(experiment, set()).add(key)
         return out
 
+    @_guarded
     def __len__(self) -> int:
         return self._conn.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
 
+    @_guarded
     def superseded(self) -> int:
         """Stored runs that no experiment names any more (made by code that has changed since)."""
         return self._conn.execute(
             "SELECT COUNT(*) FROM runs WHERE EXISTS (SELECT 1 FROM members) "
             "AND run_key NOT IN (SELECT run_key FROM members)").fetchone()[0]
 
+    @_guarded
     def records(self) -> Records:
         """Every current design as typed, read-only records (no controller): see :mod:`compare.records`.
 
@@ -407,11 +514,16 @@ class Store:
         rows = []
         for row in self._conn.execute(query):
             record = dict(zip(cols, row))
+            problem = row_problem(record)
+            if problem is not None:
+                raise StoreError(f"the result store {self.path} holds a design no method can make "
+                                 f"({record['run_key']}, {record['idx']}): {problem}")
             for key in ("instance", "params", "extras"):
                 record[key] = json.loads(record[key]) if record[key] else {}
             rows.append(record)
         return Records.from_rows(rows, self.instance_facts())
 
+    @_guarded
     def controller(self, run_key: str, idx: int = 0):
         """Rebuild a stored controller (None if the design had none)."""
         row = self._conn.execute(

@@ -53,7 +53,7 @@ print("plant-graph links:", int((inst.plant_adj != 0).sum() - np.trace(inst.plan
 designs = {
     "LQR": [lqr(inst)],
     "Sparse K (ℓ1 ADMM)": sparse_admm(inst),
-    "Sparse K, delayed (ℓ1)": sparse_delayed(inst),
+    "Sparse delayed K (ℓ1)": sparse_delayed(inst),
     "SLS (plant graph)": [sls(inst, graph="plant")],
 }
 for name, path in designs.items():

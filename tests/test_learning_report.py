@@ -149,3 +149,22 @@ def test_training_curves_take_each_method_colour_from_the_report_styles():
     grnn = by_label(axes[0])["GRNN"]
     assert grnn.get_color() == "#123456" and grnn.get_marker() == "D"
     plt.close("all")
+
+
+def test_paper_values_give_each_gap_in_standard_errors_with_what_is_known():
+    from compare.learning_report import GAP_REASONS, gap_z, paper_values
+
+    costs = list(np.linspace(1.40, 1.50, 20)) + [5.0] * 5
+    (value,) = paper_values(_fixed(costs))
+    assert (value.label, value.a_norm, value.statistic, value.paper) == ("GRNN-Fixed", 1.05, "median", 2.210)
+    assert value.outside and not value.within_noise
+    assert value.z == gap_z(value.ours, 2.210, value.low, value.high) < -2
+    # the same value and interval as the table
+    assert f"our median {value.ours:.3f} [{value.low:.3f}, {value.high:.3f}]" in table1_markdown(_fixed(costs))
+    assert "unexplained" in GAP_REASONS["grnn_fixed"] and "weight decay" in GAP_REASONS["gcnn"]
+    # every paper value the records can be compared with, in the table's row order; none for a linear ablation
+    values = paper_values(_records())
+    assert [(v.label, v.a_norm) for v in values] == [("Autonomous", 0.995), ("Autonomous", 1.05), ("GRNN", 0.995),
+                                                     ("GRNN", 1.05), ("GRNN-Sparse", 0.995), ("GRNN-Sparse", 1.05)]
+    linear = [dict(r, params={"activation": "identity"}) for r in _fixed(costs)]
+    assert paper_values(linear) == []

@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from compare.report import aggregate, budget_costs, pareto_front, plant_links, plot_cost_vs_links
 
@@ -72,8 +73,10 @@ def test_single_setting_methods_at_the_same_link_count_are_dodged():
 
     records = [_rec(inst, label, 0, 1.3) for inst in INST for label in ("autonomous", "decentralized")]
     points = aggregate(records)
-    offsets = _dodge({p.label: [(p.x, p.cost[1])] for p in points}, right=56)
-    assert len(offsets) == 2 and len(set(offsets.values())) == 2
+    offsets = _dodge({p.label: [(p.x, p.cost[1])] for p in points})
+    assert len(offsets) == 2 and sorted(offsets.values()) == [-3.5, 3.5]  # symmetric about the true count
+    # A method alone at its link count stays there, even where a path ends (LQR at N(N - 1) links).
+    assert _dodge({"lqr": [(56, 1.0)], "path": [(0, 1.5), (56, 1.0)]}) == {}
 
 
 def test_dodged_markers_stay_inside_the_axes():
@@ -86,8 +89,8 @@ def test_dodged_markers_stay_inside_the_axes():
     fig.clf()
 
 
-def test_a_summary_marker_is_drawn_only_where_some_design_reaches_it():
-    """Medians of links and of cost taken separately can describe no design: then there is no marker."""
+def test_a_summary_marker_is_drawn_only_on_or_above_its_methods_front():
+    """Medians of links and of cost taken separately can describe no typical instance: then there is no marker."""
     insts = [dict(INST[0], seed=s) for s in range(6)]
 
     def setting(links, costs):
@@ -96,13 +99,26 @@ def test_a_summary_marker_is_drawn_only_where_some_design_reaches_it():
     # Links 0, 0, 0, 50, 50, 50 (lower median 0); costs median (1.1 + 1.5) / 2 = 1.3, and every 0-link
     # design costs more than that: the medians (0, 1.3) describe no design.
     (point,) = aggregate(setting((0, 0, 0, 50, 50, 50), (1.5, 1.6, 1.7, 1.0, 1.05, 1.1)))
-    assert (point.x, point.cost[1], point.reached) == (0, 1.3, False)
+    assert (point.x, point.cost[1], point.reached, point.reach) == (0, 1.3, False, 0)
     fig, axes = plot_cost_vs_links([point])
     (ax,) = axes.values()
     assert not [line for line in ax.lines if (line.get_gid() or "").startswith("method:") and len(line.get_xdata())]
-    # A 0-link design at 1.1 reaches the medians (0, 1.15); the marker then sits at a link count some design has.
+    # One 0-link design at 1.1 reaches the medians (0, 1.15): 1 of 6 instances, not drawn (the old rule drew it).
     (point,) = aggregate(setting((0, 0, 0, 50, 50, 50), (1.1, 1.6, 1.7, 1.0, 1.05, 1.2)))
-    assert (point.x, point.cost[1], point.reached) == (0, 1.15, True)
+    assert (point.x, point.cost[1], point.reached) == (0, 1.15, False) and point.reach == pytest.approx(1 / 6)
+    # Three 0-link designs below the median cost, but the method's front within 0 links is undefined (three of
+    # six instances have none): the marker would stand below its own front, so it is not drawn.
+    (point,) = aggregate(setting((0, 0, 0, 50, 50, 50), (1.1, 1.12, 1.15, 1.3, 1.4, 1.5)))
+    assert (point.x, point.reached, point.reach) == (0, False, 0.5)
+    # Four of six with a 0-link design: the front within 0 links is (1.15 + 1.3) / 2 = 1.225, the setting's
+    # median cost too, so the marker sits on its front and is drawn.
+    (point,) = aggregate(setting((0, 0, 0, 0, 50, 50), (1.1, 1.12, 1.15, 1.3, 1.4, 1.5)))
+    assert (point.x, point.cost[1], point.reached, point.reach) == (0, pytest.approx(1.225), True, 0.5)
+    # Another setting of the same method counts: the method reaches the point on that instance.
+    more = setting((0, 0, 0, 50, 50, 50), (1.5, 1.6, 1.7, 1.0, 1.05, 1.1))
+    more += [_rec(inst, "m", 0, 1.0, params={"beta": 10.0}) for inst in insts[3:]]
+    point = next(p for p in aggregate(more) if p.params["beta"] == 1.0)
+    assert (point.x, point.reach, point.reached) == (0, 0.5, True)
     (point,) = aggregate(setting((3, 4, 7, 8, 9, 10), (1.2,) * 6))
     assert point.x == 7  # the lower median, not 7.5
 
@@ -161,7 +177,7 @@ def test_report_counts_runs_and_shows_how_to_regenerate(tmp_path):
     commands = ["compare run x --out o", "compare run y --out o", "compare report --out o"]
     files = write_report(records, tmp_path, title="T", commands=commands)
     text = files["md"].read_text()
-    assert "6 runs on 3 instances (1 panel, 3 per panel), 6 designs by 2 methods." in text
+    assert "6 runs on 3 instances (1 panel, 3 instances per panel), 6 designs by 2 methods." in text
     assert ("Regenerate with `compare run x --out o` then `compare run y --out o` (runs already in the store "
             "are skipped), or rebuild this report from its folder alone") in text
     alone = write_report(records, tmp_path, title="T", commands=["compare report --out o"])["md"].read_text()
@@ -273,7 +289,7 @@ def test_report_says_how_many_simulated_costs_were_refined_on_importance_draws()
     records = Records.from_rows([row(2e-4, "control variates: all 210 quadratic monomials", 0),
                                  row(1.6e-3, "importance sampling tilted along ...", 62000)])
     text = _precision_text(records)
-    assert text.startswith(" (control variates; 1 heavy-tailed costs re-estimated on up to 62,000")
+    assert text.startswith(" (control variates; 1 heavy-tailed cost re-estimated on up to 62,000")
     assert "largest 0.080%" in text and "median of 1.00%" in text
     plain = _precision_text(Records.from_rows([row(2e-4, "control variates: ...", 0)]))
     assert "re-estimated" not in plain and plain.startswith(" (control variates; relative")
@@ -342,3 +358,10 @@ def test_both_cost_figures_draw_a_method_s_marker_edge_alike():
         style = style_for(label)
         assert edges == {(style.edge, style.edge_width)}, (label, edges)
     assert {style_for(label).edge_width for label in drawn} == {0.6, 1.2}  # solid and edge-only markers both drawn
+
+
+def test_the_answer_comes_before_the_contents_on_the_page(tmp_path):
+    from compare.html import render_html
+
+    page = render_html("# Title\n\nThe answer, first.\n\n## Findings\n\ntext\n\n## More\n\nx\n", tmp_path, "Title")
+    assert page.index("The answer, first.") < page.index('<nav class="toc">') < page.index('id="findings"')

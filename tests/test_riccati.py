@@ -130,6 +130,86 @@ def test_dare_refuses_an_unobserved_mode_on_the_unit_circle():
         solve_discrete_are(A, B, Q, np.eye(1))
 
 
+def issue_49_dare(pole=1.2, *, b=(1.0, 0.5), delta=0.0):
+    """Issue 49's reproduction: Q = c'c sees only the stable mode (0.5) of a rotated diag(pole, 0.5)."""
+    t = 0.15
+    U = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    A = U @ np.diag([pole, 0.5]) @ U.T
+    c = np.array([[-np.sin(t), np.cos(t)]])
+    return A, np.array(b, dtype=float).reshape(2, 1), c.T @ c + delta * np.eye(2), np.eye(1)
+
+
+def test_dare_solves_issue_49s_reproduction():
+    # Cholesky succeeds on this numerically singular Q, which used to skip the fallback and
+    # report "no stabilizing solution"; scipy's closed loop has spectral radius 1 / 1.2.
+    A, B, Q, R = issue_49_dare()
+    scipy.linalg.cholesky(Q)  # no error: a plain Cholesky test calls it definite
+    P, info = solve_discrete_are(A, B, Q, R, full_output=True)
+    assert info.method == "sda+newton" and info.residual <= RESIDUAL
+    assert relative(P, scipy.linalg.solve_discrete_are(A, B, Q, R)) <= AGREEMENT
+    gain = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+    assert np.max(np.abs(np.linalg.eigvals(A - B @ gain))) == pytest.approx(1 / 1.2, rel=1e-12)
+
+
+@pytest.mark.parametrize("delta", [1e-14, 1e-12, 1e-9, 1e-6])
+def test_dare_with_a_nearly_singular_q_agrees_with_scipy(delta):
+    # Definite in exact arithmetic; the hidden mode is seen only through delta.
+    A, B, Q, R = issue_49_dare(delta=delta)
+    P, info = solve_discrete_are(A, B, Q, R, full_output=True)
+    assert info.residual <= RESIDUAL
+    assert relative(P, scipy.linalg.solve_discrete_are(A, B, Q, R)) <= 1e-9
+
+
+def test_q_rank_test_is_rank_revealing():
+    from codesign.riccati import _numerically_definite
+
+    assert not _numerically_definite(issue_49_dare()[2])  # Cholesky passes on it (above)
+    assert not _numerically_definite(np.diag([1.0, 1e-9]))  # relative tolerance 1e-8
+    assert _numerically_definite(np.diag([1.0, 1e-7]))
+    assert _numerically_definite(1e-30 * np.eye(3))  # relative, not absolute
+    assert not _numerically_definite(np.zeros((3, 3)))
+    assert not _numerically_definite(np.diag([1.0, -1e-3]))
+
+
+def test_well_posed_problems_take_the_doubling_without_the_rank_test(monkeypatch):
+    # The rank test and the fallback cost nothing where the doubling succeeds: a definite Q
+    # and a clearly stable closed loop return the doubling's (unchanged) result.
+    import codesign.riccati as riccati
+
+    def forbidden(Q):
+        raise AssertionError("the rank test ran on a well-posed problem")
+
+    monkeypatch.setattr(riccati, "_numerically_definite", forbidden)
+    for seed, (n, m) in enumerate([(12, 3), (30, 7), (45, 1)]):
+        A, B, Q, R = random_dare(seed, n, m)
+        P, info = solve_discrete_are(A, B, Q, R, full_output=True)
+        assert info.method == "sda"
+        assert relative(P, scipy.linalg.solve_discrete_are(A, B, Q, R)) <= AGREEMENT
+    instance = paper_instance(1, n=50, a_norm=1.05)
+    assert solve_discrete_are(instance.A, instance.B, instance.Q, instance.R, full_output=True)[1].method == "sda"
+
+
+def test_dare_with_a_singular_q_still_refuses_what_has_no_stabilizing_solution():
+    # Issue 49's system with its hidden mode on the unit circle (1 and -1), or nearly so
+    # (1 + 1e-9 is the circle to working precision), and with B blind to the unstable mode.
+    for pole in (1.0, -1.0, 1 + 1e-9):
+        with pytest.raises(NoStabilizingSolutionError, match="unit circle"):
+            solve_discrete_are(*issue_49_dare(pole))
+    with pytest.raises(NoStabilizingSolutionError, match="not stabilizable"):
+        solve_discrete_are(*issue_49_dare(b=(-np.sin(0.15), np.cos(0.15))))
+
+
+def test_large_instances_with_a_hidden_unstable_mode_are_stabilizable(monkeypatch):
+    # Instance.from_matrices takes this solver above FAST_DARE_ABOVE states; a user's Q = C'C
+    # with an unstable mode that C does not see used to be called "not stabilizable".
+    import codesign.instances as instances
+
+    monkeypatch.setattr(instances, "FAST_DARE_ABOVE", 1)
+    A, B, Q, R = issue_49_dare()
+    instance = instances.Instance.from_matrices(A, B, Q=Q, input_nodes=[0])
+    assert relative(instance.P, scipy.linalg.solve_discrete_are(A, B, Q, R)) <= AGREEMENT
+
+
 @pytest.mark.parametrize("change, message", [
     (lambda a: {**a, "A": np.ones((3, 2))}, "A must be square"),
     (lambda a: {**a, "B": np.ones((2, 1))}, r"B must have shape \(3, any\)"),

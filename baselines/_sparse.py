@@ -3,8 +3,11 @@
 Every sparse method (ADMM, SDP, truncation) ends the same way: fix the pattern
 of the gain it found (diagonal always free, since local feedback needs no link),
 polish the free entries on the exact finite-horizon benchmark cost, check that
-the result stabilizes, and score it exactly. The diagonal pattern is the
-decentralized design, so it is taken from :func:`baselines.decentralized`.
+the result stabilizes, and score it exactly. Where the polish from the method's
+gain does not stabilize, the shared stabilizing search (:mod:`baselines.stabilizing`)
+goes on from the decentralized gain and its own starts; a pattern is ``diverged``
+only when none of them stabilizes. The diagonal pattern is the decentralized design,
+so it is taken from :func:`baselines.decentralized`.
 """
 
 from __future__ import annotations
@@ -21,11 +24,12 @@ from codesign.status import DIVERGED, INACCURATE, OPTIMAL, USABLE
 
 from ._common import Timer
 from .lqr import decentralized
-from .polish import GRAD_RTOL, polish_gain
+from .polish import GRAD_RTOL
+from .stabilizing import is_stable, stabilizing_gain, unstable_note
 
 __all__ = ["GRAD_RTOL", "check_gammas", "pattern_of", "polished_gain", "gain_design",
            "as_path_point", "design_on_pattern", "with_diagonal_end", "DecentralizedCache",
-           "GainPoint", "infinite_horizon_point", "l1_path"]
+           "GainPoint", "infinite_horizon_point", "l1_path", "pattern_starts"]
 
 _DOUBLINGS = 60        # A_cl^(2^60): only a gain at the stability boundary needs more
 _POWER_TOL = 1e-12     # max |A_cl^(2^k)| below which the remaining terms are negligible
@@ -104,22 +108,39 @@ def masked_grad_norm(instance, K, mask) -> tuple[float, float]:
     return cost, float(np.linalg.norm(grad[mask]))
 
 
-def polished_gain(instance, K, mask, *, polish: bool = True) -> tuple[np.ndarray, dict]:
+def pattern_starts(decentral: "DecentralizedCache | None") -> list:
+    """The stabilizing search's first fallback on a pattern: the decentralized gain, where it stabilizes.
+
+    Every pattern frees each node's own block, so that gain is a point of it, and a
+    stabilizing one: polishing from it gives a stabilizing gain wherever the descent
+    stays stable, at a cost no higher than the diagonal gain's.
+    """
+    diagonal = None if decentral is None else decentral.usable()
+    return [] if diagonal is None else [("decentralized", np.array(diagonal.controller.K))]
+
+
+def polished_gain(instance, K, mask, *, polish: bool = True,
+                  decentral: "DecentralizedCache | None" = None) -> tuple[np.ndarray, dict]:
     """Polish ``K`` on ``mask`` (or not) and report what happened.
 
-    Returns the gain and extras with ``grad_norm`` (masked, of the normalized
-    cost), ``polish_iterations`` and ``polish_message``.
+    The polish is the stabilizing search (:func:`baselines.stabilizing.stabilizing_gain`)
+    from ``K``, then, where that minimum does not stabilize, from the decentralized gain
+    (``decentral``) and the search's own starts. Returns the gain and extras with
+    ``grad_norm`` (masked, of the normalized cost), ``polish_iterations`` and
+    ``polish_message``, and, where a later start gave the gain, ``polish_start`` (its
+    name) and ``polish_starts`` (the starts polished).
     """
     K = np.where(mask, K, 0.0)
     if not polish:
         _, grad_norm = masked_grad_norm(instance, K, mask)
         return K, {"grad_norm": grad_norm, "polish_iterations": 0, "polish_message": "not polished"}
-    result = polish_gain(instance, K, mask)
-    return result.K, {
-        "grad_norm": result.grad_norm,
-        "polish_iterations": result.iterations,
-        "polish_message": result.message,
-    }
+    found = stabilizing_gain(instance, mask, [("given", K)] + pattern_starts(decentral))
+    result = found.result
+    extras = {"grad_norm": result.grad_norm, "polish_iterations": result.iterations,
+              "polish_message": result.message}
+    if found.tried > 1:
+        extras.update(polish_start=found.start, polish_starts=found.tried)
+    return result.K, extras
 
 
 def gain_design(instance, method: str, params: dict, K, *, seconds: float, extras: dict,
@@ -127,16 +148,17 @@ def gain_design(instance, method: str, params: dict, K, *, seconds: float, extra
     """A :class:`Design` for the static gain ``u = K x``, scored exactly.
 
     A polished gain whose masked gradient is not below :data:`GRAD_RTOL` times its
-    cost is flagged ``inaccurate``; a gain that does not stabilize is recorded as
-    ``diverged`` (no cost), never returned as a number.
+    cost is flagged ``inaccurate``; a gain that does not stabilize
+    (:func:`baselines.stabilizing.is_stable`) is recorded as ``diverged`` (no cost),
+    never returned as a number.
     """
     K = np.asarray(K, dtype=float)
     radius = spectral_radius(instance.A + instance.B @ K)
     links, self_loops = count_links(instance.node_support(K))
     extras = {**extras, "spectral_radius": radius}
-    if not radius < 1.0:
+    if not is_stable(radius):
         return Design.failure(method, params, DIVERGED,
-                              f"gain does not stabilize (spectral radius {radius:.6g}); {message}".rstrip("; "),
+                              f"gain does not stabilize ({unstable_note(radius)}); {message}".rstrip("; "),
                               info_model="instantaneous", seconds=seconds, links=links,
                               self_loops=self_loops, extras=extras)
     cost = static_gain_cost(instance, K)
@@ -172,14 +194,18 @@ def design_on_pattern(instance, method: str, params: dict, K, *, extras: dict, p
     """Polish ``K`` on its own pattern (diagonal always free) and score it.
 
     A diagonal pattern is the decentralized design, taken from
-    :func:`baselines.decentralized` when that one stabilizes.
+    :func:`baselines.decentralized` (its failure, where that found no stabilizing gain).
     """
     mask = pattern_of(K, instance)
     if not (mask & ~instance.block_mask()).any():
         diagonal = decentral.usable()
         if diagonal is not None:
             return as_path_point(diagonal, method, params, {**extras, "decentralized": True})
-    gain, polish_extras = polished_gain(instance, K, mask, polish=polish)
+        if polish:  # the decentralized search already tried every start this one would
+            found = decentral.get()
+            return Design.failure(method, params, found.status, found.message, info_model="instantaneous",
+                                  extras={**found.extras, **extras, "decentralized": True})
+    gain, polish_extras = polished_gain(instance, K, mask, polish=polish, decentral=decentral)
     return gain_design(instance, method, params, gain, seconds=0.0, extras={**extras, **polish_extras},
                        polished=polish)
 
@@ -214,7 +240,7 @@ class DecentralizedCache:
     def usable(self) -> Design | None:
         """The decentralized design if it has a stabilizing gain, else None."""
         design = self.get()
-        if design.controller is None or not design.extras.get("spectral_radius", np.inf) < 1.0:
+        if design.status not in USABLE or not is_stable(design.extras.get("spectral_radius", np.inf)):
             return None
         return design
 
@@ -265,7 +291,7 @@ def l1_path(instance, method: str, gammas, *, solve: WeightedSolve, start_state,
             extras = {"solver": solver, **counts, "reweight_rounds": rounds, converged_key: bool(converged),
                       "fallback": False}
             design = None
-            if spectral_radius(instance.A + instance.B @ G) < 1.0:
+            if is_stable(spectral_radius(instance.A + instance.B @ G)):
                 design = design_on_pattern(instance, method, params, G, extras=extras, polish=polish,
                                            decentral=decentral)
                 why = design.message

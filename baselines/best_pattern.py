@@ -12,7 +12,10 @@ changing (``starts_to_best``); where that is the last start, more starts may low
 
 Starts, for each pattern: the dense gain restricted to the pattern (LQR's, or the
 polished dense delayed gain), the decentralized gain with the links at zero, and
-``starts - 2`` random perturbations of the first (seeded).
+``starts - 2`` random perturbations of the first (seeded). Each polish is the shared
+stabilizing search (:mod:`baselines.stabilizing`) from that start: where its minimum
+does not stabilize, the search goes on from the decentralized gain and its own starts,
+so a pattern is unstable (``diverged``) only when none of them stabilizes.
 
 Symmetries: on one-state-one-input instances, node permutations that map A, B, Q,
 R and the given graph onto themselves (the chain's reversal, say) map a pattern to

@@ -76,13 +76,16 @@ def polish_gain(instance, K0, mask=None, *, gtol: float = 1e-9, maxiter: int = 2
         return PolishResult(np.zeros_like(K0), cost, 0.0, True, "empty pattern", 0)
     import scipy.optimize  # imported on use, like every heavy package (fast CLI)
 
-    res = scipy.optimize.minimize(
-        fun,
-        K0[index],
-        jac=True,
-        method="L-BFGS-B",
-        options={"maxiter": maxiter, "gtol": gtol, "ftol": 1e-15, "maxcor": 30},
-    )
-    K = unpack(res.x)
-    cost, grad = static_gain_cost_and_grad(instance, K, mask=mask)
+    # A far start (one of the stabilizing search's, baselines.stabilizing) can overflow the
+    # rollout; that cost is +inf to L-BFGS, and the overflow itself is no news.
+    with np.errstate(over="ignore", invalid="ignore"):
+        res = scipy.optimize.minimize(
+            fun,
+            K0[index],
+            jac=True,
+            method="L-BFGS-B",
+            options={"maxiter": maxiter, "gtol": gtol, "ftol": 1e-15, "maxcor": 30},
+        )
+        K = unpack(res.x)
+        cost, grad = static_gain_cost_and_grad(instance, K, mask=mask)
     return PolishResult(K, cost, float(np.linalg.norm(grad[index])), bool(res.success), str(res.message), int(res.nit))

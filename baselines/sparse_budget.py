@@ -22,8 +22,11 @@ cost ``J(K) / trace(P)`` as the objective and whole node links as the atoms:
 Every pattern includes each node's own block (local feedback needs no link), links
 are counted between nodes and only from nodes that have an actuator. Polishing is
 the same L-BFGS on the exact cost as the other sparse methods (:func:`polish_gain`,
-:func:`baselines.sparse_delayed.polish_delayed`), so the result at L is never worse
-than truncating the dense gain to L links and polishing. The search is a heuristic:
+:func:`baselines.sparse_delayed.polish_delayed`) inside the same stabilizing search
+(:mod:`baselines.stabilizing`: where the minimum from a start does not stabilize, it
+goes on from the decentralized gain and its own starts), so the result at L is never
+worse than truncating the dense gain to L links and polishing. At budget 0 the start
+is the best diagonal gain. The search is a heuristic:
 the best pattern with L links is a combinatorial problem (see ``best_pattern``).
 """
 
@@ -46,7 +49,8 @@ from .sparse_admm import MAX_STATES_REASON as ADMM_MAX_STATES_REASON
 from .sparse_admm import sparse_admm
 from .sparse_delayed import _gain_design as delayed_design
 from .sparse_delayed import _Nodes as DelayedNodes
-from .sparse_delayed import delayed_closed_loop, delayed_gain_cost_and_grad, polish_delayed
+from .sparse_delayed import delayed_gain_cost_and_grad, stabilizing_delayed
+from .stabilizing import is_stable
 
 __all__ = ["sparse_budget", "budget_grid"]
 
@@ -114,9 +118,10 @@ class _Instantaneous:
         return self.instance.block_norms(K)
 
     def polish(self, K, links):
-        gain, extras = polished_gain(self.instance, K, self.entries(links))
+        """Polish on ``links`` (and the own blocks): the stabilizing search from ``K``, then its fallbacks."""
+        gain, extras = polished_gain(self.instance, K, self.entries(links), decentral=self.decentral)
         cost, grad = static_gain_cost_and_grad(self.instance, gain)
-        stable = spectral_radius(self.instance.A + self.instance.B @ gain) < 1.0
+        stable = is_stable(spectral_radius(self.instance.A + self.instance.B @ gain))
         return gain, cost, stable, self.instance.block_norms(grad), extras
 
     def design(self, K, params, extras):
@@ -139,8 +144,7 @@ class _Delayed:
 
     def dense(self):
         local, zero = self.local_start()
-        dense = polish_delayed(self.instance, local, zero, self.nodes.off)
-        return self.nodes.local_matrix(dense.local), dense.K_delayed
+        return stabilizing_delayed(self.instance, local, zero, self.nodes.off, decentral=self.decentral).gain
 
     def path(self):
         """Gains of the delayed ℓ1 path (:func:`baselines.sparse_delayed`), a start for every budget."""
@@ -156,13 +160,15 @@ class _Delayed:
         return self.nodes.norms(delayed_gain_cost_and_grad(self.instance, gain[0], gain[1])[2])
 
     def polish(self, gain, links):
+        """Polish on ``links`` (and the local part): the stabilizing search from ``gain``, then its fallbacks."""
         free = self.instance.expand_blocks(links) & self.nodes.off
-        result = polish_delayed(self.instance, gain[0], np.where(free, gain[1], 0.0), free)
-        local = self.nodes.local_matrix(result.local)
-        _, _, grad = delayed_gain_cost_and_grad(self.instance, local, result.K_delayed)
-        stable = spectral_radius(delayed_closed_loop(self.instance, local, result.K_delayed)) < 1.0
+        found = stabilizing_delayed(self.instance, gain[0], gain[1], free, decentral=self.decentral)
+        (local, K_delayed), result = found.gain, found.result
+        _, _, grad = delayed_gain_cost_and_grad(self.instance, local, K_delayed)
         extras = {"polish_iterations": result.iterations, "polish_message": result.message}
-        return (local, result.K_delayed), result.cost, stable, self.nodes.norms(grad), extras
+        if found.tried > 1:
+            extras.update(polish_start=found.start, polish_starts=found.tried)
+        return (local, K_delayed), result.cost, found.stable, self.nodes.norms(grad), extras
 
     def design(self, gain, params, extras):
         free = self.nodes.pattern(gain[1])
@@ -274,6 +280,10 @@ def sparse_budget(
                 # gradient to the budget) makes the result at least as good as the path at its own counts.
                 within = [g for g in path if (model.sizes(g) > 0)[admissible].sum() <= budget]
                 starts = [dense] + ([previous] if previous is not None else []) + within[:1]
+                if budget == 0:
+                    # Every start has the same (empty) pattern and only the first is polished: make it the
+                    # best local gain, so that this end is the decentralized gain, as documented.
+                    starts = [model.local_start()]
                 best, used = _pursue(model, admissible, budget, starts, int(rounds))
                 design = model.design(best["gain"], params, {"solver": "grasp", "pursuit_rounds": used,
                                                              **best["extras"]})

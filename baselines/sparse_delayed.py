@@ -66,7 +66,10 @@ reach the same pattern and objective (to 1e-9). The finite-horizon cost is a
 polynomial in the gain, finite for every gain (a trial step whose rollout
 overflows counts as +inf), so no stability barrier is needed during the solve;
 stability is checked on each polished result instead (spectral radius of the
-augmented closed loop).
+augmented closed loop below ``1 - STABILITY_TOL``, :mod:`baselines.stabilizing`),
+and where the polish from the path's gain does not stabilize, the shared stabilizing
+search goes on from the decentralized gain and its own local starts
+(:func:`stabilizing_delayed`).
 
 The group penalty of node blocks is not separable, so the ``p − q`` split does not
 apply; each weighted group-ℓ1 problem is solved by proximal gradient instead
@@ -95,8 +98,9 @@ from codesign.methods import Above, AtLeast, NotEmpty, method
 from codesign.status import DIVERGED, INACCURATE, OPTIMAL, USABLE
 
 from ._common import Timer
-from ._sparse import GRAD_RTOL, DecentralizedCache, check_gammas
+from ._sparse import GRAD_RTOL, DecentralizedCache, check_gammas, pattern_starts
 from .sparse_admm import ADMM_GAMMAS
+from .stabilizing import Minimum, is_stable, local_starts, search, unstable_note
 
 __all__ = [
     "sparse_delayed",
@@ -106,6 +110,7 @@ __all__ = [
     "delayed_gain_cost_and_grad",
     "delayed_closed_loop",
     "polish_delayed",
+    "stabilizing_delayed",
     "DelayedGainResult",
 ]
 
@@ -749,6 +754,42 @@ def _weighted_group_l1(instance, K_local, K_delayed, threshold, *, tol, maxiter)
     return DelayedGainResult(L, D, float(objective), float("nan"), success, message, iterations, evaluations)
 
 
+def stabilizing_delayed(instance, K_local, K_delayed, free, *, decentral: DecentralizedCache | None = None,
+                        maxiter: int = 2000) -> Minimum:
+    """:func:`polish_delayed` on ``free`` from the given gain, then from the stabilizing search's starts.
+
+    The shared search of :mod:`baselines.stabilizing` on the delayed gain: where the
+    minimum from ``(K_local, K_delayed)`` does not stabilize the augmented closed loop,
+    it goes on from the decentralized gain (``decentral``) and the search's own local
+    starts, all with no link (``K_delayed = 0``), until one does.
+
+    Returns
+    -------
+    Minimum
+        ``gain`` the polished ``(K_local, K_delayed)`` (K_local as an (m, n) matrix),
+        ``radius`` the augmented loop's, ``result`` the :class:`DelayedGainResult`.
+    """
+    nodes = _Nodes(instance)
+    free = np.asarray(free, dtype=bool) & nodes.off
+    zero = np.zeros((instance.m, instance.n))
+
+    def polish(gain):
+        result = polish_delayed(instance, gain[0], np.where(free, gain[1], 0.0), free, maxiter=maxiter)
+        local = nodes.local_matrix(result.local)
+        finite = np.all(np.isfinite(local)) and np.all(np.isfinite(result.K_delayed))
+        radius = spectral_radius(delayed_closed_loop(instance, local, result.K_delayed)) if finite else np.inf
+        return (local, result.K_delayed), result.cost, radius, result
+
+    def starts():
+        yield "given", (nodes.local_matrix(nodes.local(K_local)), np.where(free, K_delayed, 0.0))
+        for name, K in pattern_starts(decentral):
+            yield name, (nodes.local_matrix(nodes.local(K)), zero)
+        for name, K in local_starts(instance):
+            yield name, (nodes.local_matrix(nodes.local(K)), zero)
+
+    return search(polish, starts(), exhaustive=False)
+
+
 # -- from a gain to a design ---------------------------------------------------------
 def _masked_grad_norm(instance, nodes: _Nodes, local, K_delayed, free) -> tuple[float, float]:
     """(normalized cost, norm of its gradient over the local part and the ``free`` entries of K_delayed)."""
@@ -776,8 +817,8 @@ def _gain_design(instance, params: dict, local, K_delayed, *, extras: dict, free
     radius = spectral_radius(delayed_closed_loop(instance, K_local, K_delayed))
     links, self_loops = count_links(nodes.support(K_local, K_delayed))
     extras = {**extras, "spectral_radius": radius}
-    if not radius < 1.0:
-        note = f"the delayed gain does not stabilize (spectral radius of the augmented closed loop {radius:.6g})"
+    if not is_stable(radius):
+        note = f"the delayed gain does not stabilize ({unstable_note(radius, 'the augmented closed loop')})"
         return Design.failure(METHOD, params, DIVERGED, f"{note}; {message}" if message else note,
                               info_model=INFO_MODEL, seconds=seconds, links=links, self_loops=self_loops,
                               extras=extras)
@@ -872,10 +913,11 @@ def sparse_delayed(
         = 1e-6 or the design is ``inaccurate``), ``solver``, ``l1_iterations``,
         ``l1_evaluations``, ``reweight_rounds``, ``l1_converged``,
         ``polish_iterations``, ``polish_message``, ``decentralized`` (a pattern with
-        no link is the decentralized gain). A polished gain that does not stabilize
-        is recorded as ``diverged`` (no controller, NaN cost, the spectral radius in
-        the message) and the next γ restarts from the last γ that gave a usable
-        design.
+        no link is the decentralized gain), ``polish_start`` and ``polish_starts``
+        where the stabilizing search needed a later start than the path's gain. A
+        pattern on which that search finds no stabilizing gain is recorded as
+        ``diverged`` (no controller, NaN cost, the spectral radius in the message)
+        and the next γ restarts from the last γ that gave a usable design.
 
     Raises
     ------
@@ -940,9 +982,13 @@ def sparse_delayed(
             if not free.any() and diagonal_ok:
                 design = _diagonal_design(instance, params, diagonal, extras)
             else:
-                polished = polish_delayed(instance, nodes.local_matrix(local), K_delayed, free, maxiter=maxiter)
+                found = stabilizing_delayed(instance, nodes.local_matrix(local), K_delayed, free, decentral=decentral,
+                                            maxiter=maxiter)
+                polished = found.result
                 extras.update(polish_iterations=polished.iterations, polish_evaluations=polished.evaluations,
                               polish_message=polished.message)
+                if found.tried > 1:
+                    extras.update(polish_start=found.start, polish_starts=found.tried)
                 if gamma == 0:  # the dense gain is the warm start of the path
                     local, K_delayed = polished.local, polished.K_delayed
                 design = _gain_design(instance, params, polished.local, polished.K_delayed, extras=extras,

@@ -62,8 +62,9 @@ def truncated_lqr(instance, *, links: Annotated[list[Annotated[int, AtLeast(0)]]
     -------
     list of Design
         One per link count (``params = {"links": count}``), information model
-        ``instantaneous``. A truncated gain that does not stabilize after polishing
-        is recorded as ``diverged``.
+        ``instantaneous``. The polish is the stabilizing search
+        (:mod:`baselines.stabilizing`) from the truncated gain; a pattern on which it
+        finds no stabilizing gain is recorded as ``diverged``.
     """
     n = instance.nodes
     most = n * (n - 1)

@@ -28,6 +28,7 @@ __all__ = [
     "NO_DESIGN",
     "SOLVER_STATUS",
     "INACCURATE_RTOL",
+    "STABILITY_TOL",
     "solver_status",
     "vet_solver_cost",
 ]
@@ -72,6 +73,14 @@ SOLVER_STATUS = {
 #: still rejects the solves that stop far away (objectives off by orders of magnitude,
 #: e.g. 1e29 on infeasible supports).
 INACCURATE_RTOL = 1e-3
+
+#: A static design (a gain ``u = K x``, or a delayed gain on its augmented loop) is usable
+#: only if its closed loop's spectral radius is below ``1 - STABILITY_TOL``; otherwise it
+#: is ``diverged``. The benchmark's cost is a finite-horizon one, finite for unstable gains
+#: too, so the cost alone cannot say this. The margin is far above the eigenvalue solver's
+#: error on these loops (about 1e-12 relative), and a loop within it of the unit circle
+#: (a time constant of a million steps or more) stabilizes nothing a report should count.
+STABILITY_TOL = 1e-6
 
 
 def solver_status(raw) -> str:

@@ -66,16 +66,35 @@ def test_decentralized_status_follows_the_gradient_not_the_line_search(monkeypat
     import importlib
 
     lqr_module = importlib.import_module("baselines.lqr")  # the package re-exports a function of that name
+    from baselines import stabilizing
     from baselines.polish import GRAD_RTOL, PolishResult
 
     inst = paper_instance(1, n=8, degree=4, a_norm=1.05, horizon=12)
-    true = lqr_module.polish_gain(inst, np.diag(np.diag(inst.K_lqr)), np.eye(8, dtype=bool))
+    true = polish_gain(inst, np.diag(np.diag(inst.K_lqr)), np.eye(8, dtype=bool))
 
     def abnormal(grad_norm):
         return lambda *a, **k: PolishResult(true.K, true.cost, grad_norm, False, "ABNORMAL: ", 54)
 
-    monkeypatch.setattr(lqr_module, "polish_gain", abnormal(1e-3 * GRAD_RTOL * true.cost))
+    # Every start of the search ends at this minimum; the first is kept.
+    monkeypatch.setattr(stabilizing, "polish_gain", abnormal(1e-3 * GRAD_RTOL * true.cost))
     assert lqr_module.decentralized(inst).status == "optimal"
-    monkeypatch.setattr(lqr_module, "polish_gain", abnormal(10 * GRAD_RTOL * true.cost))
+    monkeypatch.setattr(stabilizing, "polish_gain", abnormal(10 * GRAD_RTOL * true.cost))
     flagged = lqr_module.decentralized(inst)
     assert flagged.status == "inaccurate" and "gradient norm" in flagged.message
+
+
+def test_autonomous_with_an_exploding_open_loop_is_diverged():
+    """a_norm = 1e6: the open-loop cost overflows; the design is diverged, with the radius, not a crash."""
+    inst = paper_instance(0, n=4, degree=2, a_norm=1e6)
+    d = autonomous(inst)
+    assert d.status == "diverged" and d.controller is None and np.isnan(d.cost)
+    assert "open-loop spectral radius 1e+06" in d.message and d.extras["spectral_radius"] >= 1
+    assert decentralized(inst).status == "diverged"  # no stabilizing diagonal gain either
+    assert lqr(inst).status == "optimal"
+
+
+def test_autonomous_keeps_a_finite_unstable_open_loop_cost():
+    """The reference "no control" cost is reported wherever it is finite, an unstable plant included."""
+    inst = paper_instance(1, n=4, degree=2, a_norm=1.2)
+    d = autonomous(inst)
+    assert d.status == "optimal" and np.isfinite(d.cost) and d.extras["spectral_radius"] > 1

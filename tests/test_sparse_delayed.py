@@ -239,8 +239,8 @@ def test_bad_hyperparameters_raise(kwargs, match):
         sparse_delayed(paper_instance(0, n=6), **kwargs)
 
 
-def test_a_destabilizing_gain_is_recorded_as_diverged(monkeypatch):
-    inst = paper_instance(1, n=8)
+def _unstable_second_polish(monkeypatch):
+    """polish_delayed, but its second call leaves a destabilizing gain."""
     real = delayed_module.polish_delayed
     calls = []
 
@@ -252,12 +252,29 @@ def test_a_destabilizing_gain_is_recorded_as_diverged(monkeypatch):
         return result
 
     monkeypatch.setattr(delayed_module, "polish_delayed", unstable_second)
+
+
+def test_a_destabilizing_gain_is_recorded_as_diverged(monkeypatch):
+    inst = paper_instance(1, n=8)
+    _unstable_second_polish(monkeypatch)
+    # Only the path's own start: the stabilizing search's fallbacks are the next test's.
+    monkeypatch.setattr(delayed_module, "pattern_starts", lambda decentral: [])
+    monkeypatch.setattr(delayed_module, "local_starts", lambda instance: iter(()))
     first, second, third = sparse_delayed(inst, gammas=[0.0, 1e-4, 1e-3], diagonal_end=False)
     assert first.status == "optimal"
     assert second.status == "diverged" and second.controller is None and np.isnan(second.cost)
     assert "does not stabilize" in second.message and second.extras["spectral_radius"] >= 1
     assert second.info_model == "delayed" and second.links > 0
     assert third.status == "optimal" and third.extras["spectral_radius"] < 1
+
+
+def test_the_stabilizing_search_goes_on_from_the_diagonal_gain(monkeypatch):
+    inst = paper_instance(1, n=8)
+    _unstable_second_polish(monkeypatch)
+    first, second, third = sparse_delayed(inst, gammas=[0.0, 1e-4, 1e-3], diagonal_end=False)
+    assert [d.status for d in (first, second, third)] == ["optimal"] * 3
+    assert second.extras["polish_start"] == "decentralized" and second.extras["polish_starts"] == 2
+    assert second.extras["spectral_radius"] < 1 and "polish_start" not in third.extras
 
 
 def test_registered_method():

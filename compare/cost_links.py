@@ -25,10 +25,10 @@ import numpy as np
 from .figures import (OFF_SCALE, _y_limits, boundary_handles, draw_boundary, draw_front_line, shared_y, excess,
                       excess_axis, finish_legend, legend_handles, links_axis, method_gid, panel_figure, panel_heading)
 from .records import as_records
-from .statistics import front_quantiles
+from .statistics import best_within, front_quantiles
 from .styles import Style
 
-__all__ = ["Point", "aggregate", "pareto_front", "plot_cost_vs_links", "quartiles", "REACH_SHARE"]
+__all__ = ["Point", "aggregate", "pareto_front", "plot_cost_vs_links", "quartiles", "REACH_SHARE", "axis_costs"]
 
 #: A summary point is drawn only where at least this share of its instances reach it.
 REACH_SHARE = 0.5
@@ -109,12 +109,20 @@ def aggregate(records) -> list[Point]:
 
 
 def _front_at(method, links: float) -> float:
-    """The method's budget front at ``links``: median over its instances of the best cost within that many links."""
-    best: dict = {key: np.inf for key in method.by_instance}
-    for r in method:
-        if r.ok and r.links <= links:
-            best[r.instance.key] = min(best[r.instance.key], r.cost)
-    return float(front_quantiles(np.array(list(best.values()))[:, None])[0][1, 0])
+    """The method's budget front at ``links`` (:func:`compare.statistics.budget_fronts`' median there)."""
+    best = best_within(method, sorted(method.by_instance), [links])
+    return float(front_quantiles(best)[0][1, 0])
+
+
+def axis_costs(points: list[Point], fronts) -> list[float]:
+    """The costs a cost-versus-links axis must show: drawn setting medians and front medians, up to OFF_SCALE.
+
+    The static figure and the interactive one take their cost axes from this one list, so
+    that both clip alike.
+    """
+    costs = [p.cost[1] for p in points if p.ok and p.reached]
+    costs += [c for f in fronts for c in f.cost[1] if np.isfinite(c)]
+    return [c for c in costs if c <= OFF_SCALE]
 
 
 def pareto_front(points: list[Point]) -> list[Point]:
@@ -220,12 +228,7 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
     if fronts is None:
         fronts = budget_fronts(records) if records is not None else []
 
-    def shown_costs(group, panel_fronts):
-        costs = [p.cost[1] for p in group if p.ok and p.reached]
-        costs += [c for f in panel_fronts for c in f.cost[1] if np.isfinite(c)]
-        return [c for c in costs if c <= OFF_SCALE]
-
-    limits = _y_limits(shown_costs(points, fronts)) if shared_y(panels) else None
+    limits = _y_limits(axis_costs(points, fronts)) if shared_y(panels) else None
     for panel in panels:
         ax = axes[panel]
         usable = [p for p in points if p.panel == panel and p.ok > 0]
@@ -233,7 +236,7 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
             continue
         mine = {f.label: f for f in fronts if f.panel == panel}
         scale = panel[1] if per_node and panel[1] else 1.0  # links per node; 0: a family without n
-        bottom, top = limits or _y_limits(shown_costs(usable, mine.values()))
+        bottom, top = limits or _y_limits(axis_costs(usable, mine.values()))
         right = max(p.links[2] for p in usable) / scale
         for label, rs in (designs[panel].by_label.items() if panel in designs else ()):
             ok = [r for r in rs if r.ok]

@@ -99,7 +99,7 @@ import numpy as np
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
-from .cost_links import aggregate
+from .cost_links import aggregate, axis_costs
 from .figures import BOUNDARY_LABEL, OFF_SCALE, FLOOR, _y_limits, excess, panel_heading, shared_y
 from .records import as_records
 from .statistics import budget_fronts
@@ -472,12 +472,7 @@ def cost_links_figure(records, styles: Mapping, *, boundaries: Mapping | None = 
     order = _label_order(usable.by_label, styles)
     varying = _varying_params(records)
 
-    def shown(group, group_fronts):
-        costs = [p.cost[1] for p in group if p.reached]
-        costs += [c for f in group_fronts for c in f.cost[1] if np.isfinite(c)]
-        return [c for c in costs if c <= OFF_SCALE]
-
-    limits = _y_limits(shown(points, fronts)) if shared_y(panels) else None
+    limits = _y_limits(axis_costs(points, fronts)) if shared_y(panels) else None
     fig, cells, rows, cols = _new_figure(panels, titles)
     axes, shown_legend = {}, set()
     by_panel_label = usable.by_panel_label
@@ -485,7 +480,7 @@ def cost_links_figure(records, styles: Mapping, *, boundaries: Mapping | None = 
     for panel in panels:
         mine_points = [p for p in points if p.panel == panel]
         mine_fronts = {f.label: f for f in fronts if f.panel == panel}
-        bottom, top = limits or _y_limits(shown(mine_points, mine_fronts.values()))
+        bottom, top = limits or _y_limits(axis_costs(mine_points, mine_fronts.values()))
         right = max((r.links for r in usable if r.instance.panel == panel), default=1)
         ax = axes[panel] = _Axes(panel, per_node, bottom, top * 1.3, right)
         row, col = cells[panel]
@@ -543,7 +538,7 @@ def cost_links_figure(records, styles: Mapping, *, boundaries: Mapping | None = 
             any_boundary = True
     key = ("line: each method's budget front, the median over instances of its best cost within L links · "
            "marker: one setting's medians, where on or above its method's front · faint: every design "
-           f"· ▲ on the top edge: above the axis (hover for the value)"
+           "· ▲ on the top edge: above the axis (hover for the value)"
            + (" · dotted: QI boundary" if any_boundary else ""))
     return _finish(fig, axes, cells, rows, cols, per_node, y_title="excess cost over LQR (J − 1)", key=key,
                    legend=_legend_meta(order, styles, any_boundary), titles=titles, title=title)

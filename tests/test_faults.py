@@ -7,7 +7,6 @@ stored results equal those of a clean run.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import signal
 import sqlite3
@@ -22,6 +21,7 @@ from click.testing import CliRunner
 from compare import Store, StoreError, parse_spec, run_experiment
 from compare.cli import main
 from compare.store import APPLICATION_ID, SCHEMA_VERSION
+from cli_checks import error_line, file_sha  # tests/cli_checks.py
 
 PLUGIN = Path(__file__).resolve().parent / "fault_methods.py"
 
@@ -44,16 +44,6 @@ def _spec(path: Path, methods: list[str], *, name: str = "faults", extra: str = 
     return path
 
 
-def _sha(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def _error_line(result) -> str:
-    assert result.exit_code == 2, (result.exit_code, result.output)
-    lines = [line for line in result.output.splitlines() if line.strip()]
-    assert len(lines) == 1 and lines[0].startswith("Error:"), result.output
-    assert "Traceback" not in result.output
-    return lines[0]
 
 
 # -- foreign files ------------------------------------------------------------------------------
@@ -117,7 +107,7 @@ FOREIGN = {
 def test_a_foreign_file_is_refused_and_left_untouched(tmp_path, case):
     make, words = FOREIGN[case]
     path = make(tmp_path / "other.sqlite")
-    before = _sha(path)
+    before = file_sha(path)
     with pytest.raises(StoreError, match=words):
         Store(path)
     spec = _spec(tmp_path / "s.toml", ["lqr"])
@@ -125,9 +115,9 @@ def test_a_foreign_file_is_refused_and_left_untouched(tmp_path, case):
                   "--no-progress"],
                  ["report", "--out", str(tmp_path / "rep"), "--store", str(path)],
                  ["export", "--out", str(tmp_path / "exp"), "--store", str(path)]):
-        line = _error_line(CliRunner().invoke(main, args))
+        line = error_line(CliRunner().invoke(main, args))
         assert words in line, line
-        assert _sha(path) == before, f"{case}: {args[0]} changed the file"
+        assert file_sha(path) == before, f"{case}: {args[0]} changed the file"
     assert not (tmp_path / "out" / "report.md").exists()
 
 
@@ -136,7 +126,7 @@ def test_reading_commands_do_not_adopt_an_empty_file(tmp_path):
     empty.touch()
     for args in (["report", "--out", str(tmp_path), "--store", str(empty)],
                  ["export", "--out", str(tmp_path / "x"), "--store", str(empty)]):
-        _error_line(CliRunner().invoke(main, args))
+        error_line(CliRunner().invoke(main, args))
         assert empty.stat().st_size == 0
 
 
@@ -163,7 +153,7 @@ def test_a_new_store_is_marked_and_an_unmarked_old_store_is_migrated_atomically(
 def test_bogus_executor_is_refused_before_a_store_exists(tmp_path):
     spec = _spec(tmp_path / "s.toml", ["lqr"])
     out = tmp_path / "out"
-    line = _error_line(CliRunner().invoke(main, ["run", str(spec), "--out", str(out), "--executor", "spark",
+    line = error_line(CliRunner().invoke(main, ["run", str(spec), "--out", str(out), "--executor", "spark",
                                                  "--no-progress"]))
     assert "unknown executor 'spark'" in line
     assert not (out / "results.sqlite").exists()
@@ -194,7 +184,7 @@ def test_an_unwritable_folder_is_refused_before_any_work(tmp_path, monkeypatch):
     out.mkdir()
     real = os.access
     monkeypatch.setattr(os, "access", lambda p, mode: False if Path(p) == out and mode & os.W_OK else real(p, mode))
-    line = _error_line(CliRunner().invoke(main, ["run", str(spec), "--out", str(out), "--no-progress"]))
+    line = error_line(CliRunner().invoke(main, ["run", str(spec), "--out", str(out), "--no-progress"]))
     assert "not writable" in line
     assert not (out / "results.sqlite").exists()
 
@@ -344,7 +334,7 @@ def test_a_plugin_that_exits_at_import_is_a_one_line_error(tmp_path):
     plugin.write_text("import sys\nsys.exit(3)\n")
     spec = tmp_path / "s.toml"
     spec.write_text(f'name = "x"\nplugins = ["{plugin}"]\n{INSTANCES}\n[[methods]]\nmethod = "lqr"\n')
-    line = _error_line(CliRunner().invoke(main, ["run", str(spec), "--out", str(tmp_path / "o"), "--no-progress"]))
+    line = error_line(CliRunner().invoke(main, ["run", str(spec), "--out", str(tmp_path / "o"), "--no-progress"]))
     assert "importing" in line and "SystemExit: 3" in line
     assert not (tmp_path / "o").exists()
 
@@ -353,7 +343,7 @@ def test_an_unreachable_scheduler_is_refused_before_a_store_exists(tmp_path):
     pytest.importorskip("distributed")
     spec = _spec(tmp_path / "s.toml", ["lqr"])
     out = tmp_path / "out"
-    line = _error_line(CliRunner().invoke(main, ["run", str(spec), "--out", str(out), "--executor",
+    line = error_line(CliRunner().invoke(main, ["run", str(spec), "--out", str(out), "--executor",
                                                  "dask://127.0.0.1:1", "--no-progress"]))
     assert "cannot reach the dask scheduler at tcp://127.0.0.1:1" in line
     assert not (out / "results.sqlite").exists()

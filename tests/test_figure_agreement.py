@@ -9,7 +9,6 @@ order A at or below B at L on P. On the reports shipped before these rules, 381 
 
 from __future__ import annotations
 
-import sys
 from functools import lru_cache
 from pathlib import Path
 
@@ -20,9 +19,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).parent))
 from figure_agreement import (Drawn, below_their_front, contradictions, plotly_figures, plotly_fronts,  # noqa: E402
-                              plotly_points, reach, static_fronts, static_points, unreached)
+                              plotly_points, reach, static_fronts, static_points, unreached)  # tests/figure_agreement.py
 
 from compare.cost_links import aggregate, plot_cost_vs_links  # noqa: E402
 from compare.figures import plot_budget_fronts  # noqa: E402

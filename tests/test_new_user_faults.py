@@ -8,7 +8,6 @@ leaves stored results as they were (checked by hash); a method's failure is its 
 from __future__ import annotations
 
 import csv
-import hashlib
 import random
 import re
 import shutil
@@ -27,6 +26,8 @@ from compare import Store, StoreError, parse_spec, run_experiment
 from compare.spec import SpecError
 from compare.cli import main
 
+from cli_checks import error_line, file_sha  # tests/cli_checks.py
+
 HERE = Path(__file__).resolve().parent
 
 INSTANCES = """
@@ -41,17 +42,6 @@ horizon = 10
 SPEC = f'name = "newuser"\n{INSTANCES}\n[[methods]]\nmethod = "lqr"\n'
 
 
-def _sha(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def _error_line(result) -> str:
-    """The one ``Error:`` line of a refused command (exit 2, nothing else on stdout or stderr)."""
-    assert result.exit_code == 2, (result.exit_code, result.output)
-    lines = [line for line in result.output.splitlines() if line.strip()]
-    assert len(lines) == 1 and lines[0].startswith("Error:"), result.output
-    assert "Traceback" not in result.output
-    return lines[0]
 
 
 def _invoke(*args):
@@ -79,15 +69,15 @@ def _damage(path: Path) -> Path:
 
 def test_a_damaged_store_is_refused_by_name_and_left_byte_identical(good_store, tmp_path):
     path = _damage(shutil.copy(good_store, tmp_path / "damaged.sqlite"))
-    before = _sha(path)
+    before = file_sha(path)
     spec = tmp_path / "s.toml"
     spec.write_text(SPEC)
     for args in (["report", "--out", tmp_path / "rep", "--store", path],
                  ["run", spec, "--out", tmp_path / "out", "--store", path, "--workers", "1", "--no-progress"],
                  ["export", "--out", tmp_path / "exp", "--store", path]):
-        line = _error_line(_invoke(*args))
+        line = error_line(_invoke(*args))
         assert f"the result store {path} is damaged" in line, line
-        assert _sha(path) == before, f"{args[0]} changed the damaged store"
+        assert file_sha(path) == before, f"{args[0]} changed the damaged store"
     assert not (tmp_path / "rep" / "report.md").exists() and not (tmp_path / "out" / "report.md").exists()
 
 
@@ -108,15 +98,15 @@ def test_a_foreign_wal_database_gets_no_files_beside_it(tmp_path):
         con.execute("CREATE TABLE photos (id INTEGER PRIMARY KEY, name TEXT)")
     con.close()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["w.sqlite"]
-    before = _sha(path)
+    before = file_sha(path)
     spec = tmp_path / "s.toml"
     spec.write_text(SPEC)
     for args in (["export", "--out", tmp_path / "exp", "--store", path],
                  ["report", "--out", tmp_path / "rep", "--store", path],
                  ["run", spec, "--out", tmp_path / "out", "--store", path, "--workers", "1", "--no-progress"]):
-        line = _error_line(_invoke(*args))
+        line = error_line(_invoke(*args))
         assert "not a result store" in line and "left untouched" in line, line
-        assert _sha(path) == before
+        assert file_sha(path) == before
         assert not list(tmp_path.glob("w.sqlite-*")), f"{args[0]} left {list(tmp_path.glob('w.sqlite-*'))}"
 
 
@@ -197,7 +187,7 @@ def test_an_unserializable_design_is_its_runs_failure_on_every_executor(tmp_path
 def test_a_where_that_selects_no_instance_is_refused_naming_the_key_and_its_values(tmp_path, methods, words):
     spec = tmp_path / "w.toml"
     spec.write_text(f'name = "w"\n{INSTANCES}\n{methods}')
-    line = _error_line(_invoke("run", spec, "--out", tmp_path / "out", "--no-progress"))
+    line = error_line(_invoke("run", spec, "--out", tmp_path / "out", "--no-progress"))
     assert words in line, line
     assert not (tmp_path / "out").exists()
 
@@ -234,10 +224,10 @@ def test_a_hand_edited_runs_csv_is_refused_naming_the_file_line_and_field(report
                                                                           words):
     folder = shutil.copytree(report_folder, tmp_path / "rep")
     line = _edit_runs_csv(folder, column, value)
-    before = {p.name: _sha(p) for p in folder.iterdir()}
-    error = _error_line(_invoke("report", "--out", folder))
+    before = {p.name: file_sha(p) for p in folder.iterdir()}
+    error = error_line(_invoke("report", "--out", folder))
     assert f"{folder / 'runs.csv'} line {line}: {words}" in error, error
-    assert {p.name: _sha(p) for p in folder.iterdir()} == before
+    assert {p.name: file_sha(p) for p in folder.iterdir()} == before
 
 
 def test_the_store_refuses_its_own_rows_by_the_same_check(good_store, tmp_path):
@@ -248,7 +238,7 @@ def test_the_store_refuses_its_own_rows_by_the_same_check(good_store, tmp_path):
     con.close()
     with Store(path) as store, pytest.raises(StoreError, match=r"links -3 is not a count"):
         store.records()
-    line = _error_line(_invoke("report", "--out", tmp_path / "rep", "--store", path))
+    line = error_line(_invoke("report", "--out", tmp_path / "rep", "--store", path))
     assert "links -3 is not a count" in line and str(path) in line
 
 
@@ -283,7 +273,7 @@ def test_a_library_warning_while_checking_a_spec_does_not_precede_the_error_line
         warnings.simplefilter("default")
         warnings.showwarning = _print_warning
         result = _invoke("run", spec, "--out", tmp_path / "out", "--no-progress")
-    line = _error_line(result)
+    line = error_line(result)
     assert "not stabilizable" in line and result.stderr.strip() == line
 
 
@@ -295,7 +285,7 @@ def test_a_workers_warning_does_not_precede_the_error_line(tmp_path, capfd):
                       "    raise ImportError('this plug-in is not installed on the worker')\n")
     spec = tmp_path / "s.toml"
     spec.write_text(f'name = "wk"\nplugins = ["{plugin}"]\n{INSTANCES}\n[[methods]]\nmethod = "lqr"\n')
-    line = _error_line(_invoke("run", spec, "--out", tmp_path / "out", "--workers", "1", "--no-progress"))
+    line = error_line(_invoke("run", spec, "--out", tmp_path / "out", "--workers", "1", "--no-progress"))
     assert line.startswith("Error: a worker could not load method"), line
     # The worker process writes to the real stderr (file descriptor 2), which capfd holds.
     assert "a worker warns" not in capfd.readouterr().err
@@ -328,7 +318,7 @@ def test_a_warning_in_a_command_that_succeeds_is_shown_once_at_its_end(tmp_path)
 def test_a_million_seeds_is_refused_up_front_naming_the_limit_and_the_key_that_raises_it(tmp_path):
     spec = tmp_path / "big.toml"
     spec.write_text('name = "big"\n[instances]\nn = [6]\nseeds = 1000000\n[[methods]]\nmethod = "lqr"\n')
-    line = _error_line(_invoke("run", spec, "--out", tmp_path / "out", "--no-progress"))
+    line = error_line(_invoke("run", spec, "--out", tmp_path / "out", "--no-progress"))
     assert ("instances: 1000000 instances, more than the 50000 an experiment plans by default" in line
             and "set max_instances = 1000000 at the top of the spec" in line), line
     assert not (tmp_path / "out").exists()
@@ -439,7 +429,7 @@ def test_a_plugin_named_by_module_and_by_file_is_the_documented_already_register
         "def plain(instance, *, seed: int = 0):\n    return lqr_again(instance)\n")
     spec = tmp_path / "s.toml"
     spec.write_text(f'name = "dbl"\nplugins = ["nu_double"]\n{INSTANCES}\n[[methods]]\nmethod = "nu_double.py:plain"\n')
-    line = _error_line(_invoke("run", spec, "--out", tmp_path / "out", "--no-progress"))
+    line = error_line(_invoke("run", spec, "--out", tmp_path / "out", "--no-progress"))
     assert "method 'nu_double_lqr' is already registered (from nu_double)" in line, line
     assert "is already registered (from\nmy_methods)" in (DOCS / "extending.md").read_text()
 

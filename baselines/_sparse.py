@@ -218,11 +218,16 @@ def with_diagonal_end(designs: list, method: str, base: dict, decentral: "Decent
     A path with no usable design (an infeasible SDP, say) is left as it is: its
     γ → ∞ limit is just as infeasible.
     """
-    diagonal = decentral.usable()
+    # The end point's seconds are what finding the diagonal gain costs here: nothing where an
+    # earlier γ's timer already paid for it (the decentralized design's own seconds would count
+    # it twice, and the path's seconds then exceeded its run's wall time).
+    with Timer() as timer:
+        diagonal = decentral.usable()
     if diagonal is None or not any(d.status in USABLE for d in designs):
         return designs
     params = {**base, "gamma": float("inf")}
-    return designs + [as_path_point(diagonal, method, params, {"solver": "decentralized", "decentralized": True})]
+    point = as_path_point(diagonal, method, params, {"solver": "decentralized", "decentralized": True})
+    return designs + [replace(point, seconds=float(timer.seconds))]
 
 
 class DecentralizedCache:

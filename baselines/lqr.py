@@ -64,7 +64,7 @@ def autonomous(instance) -> Design:
     with np.errstate(over="ignore", invalid="ignore"):
         cost = static_gain_cost(instance, np.zeros((instance.m, instance.n)))
     if not np.isfinite(cost):
-        status = DIVERGED if not radius < 1.0 else FAILED
+        status = DIVERGED if not is_stable(radius) else FAILED
         return Design.failure("autonomous", {}, status,
                               f"the open-loop cost is {cost} (open-loop spectral radius {radius:.6g})",
                               extras=extras)

@@ -38,6 +38,7 @@ from codesign.evaluation import spectral_radius
 from codesign.methods import Above, AtLeast, NotEmpty, method
 
 from ._sparse import DecentralizedCache, check_gammas, infinite_horizon_point, l1_path
+from .stabilizing import is_stable, unstable_note
 
 __all__ = ["sparse_admm", "ADMM_GAMMAS", "admm_gamma_max"]
 
@@ -50,10 +51,6 @@ _BACKTRACK = 0.5
 _MAX_BACKTRACKS = 40
 _KSTEP_MAXITER = 50
 _REL_TOL = 1e-2        # relative part of the ADMM residual test (lqrsp's eps_rel)
-
-
-def _stable(Acl) -> bool:
-    return spectral_radius(Acl) < 1.0
 
 
 def _kstep(instance, point, U, rho, *, tol, maxiter):
@@ -222,11 +219,10 @@ def sparse_admm(
     if K.shape != (m, n) or not np.all(np.isfinite(K)):
         raise ValueError(f"start must be a finite ({m}, {n}) gain, got shape {K.shape}")
     start_point = infinite_horizon_point(instance, K)
-    if start_point is None or not _stable(instance.A + instance.B @ K):
-        raise ValueError(
-            f"start gain does not stabilize the instance (spectral radius "
-            f"{spectral_radius(instance.A + instance.B @ K):.6g}); ADMM needs a stabilizing start"
-        )
+    radius = spectral_radius(instance.A + instance.B @ K)
+    if start_point is None or not is_stable(radius):
+        raise ValueError(f"start gain does not stabilize the instance ({unstable_note(radius)}); "
+                         "ADMM needs a stabilizing start")
 
     base = {"reweight": int(reweight), "rho": float(rho)}
     scale = instance.trace_P  # the ADMM itself runs on trace(P_K), as in lqrsp

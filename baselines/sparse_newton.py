@@ -48,6 +48,7 @@ from codesign.methods import Above, AtLeast, NotEmpty, method
 
 from ._sparse import check_gammas, infinite_horizon_point, l1_path
 from .sparse_admm import ADMM_GAMMAS
+from .stabilizing import is_stable, unstable_note
 
 __all__ = ["sparse_newton"]
 
@@ -368,11 +369,10 @@ def sparse_newton(
     if K.shape != (m, n) or not np.all(np.isfinite(K)):
         raise ValueError(f"start must be a finite ({m}, {n}) gain, got shape {K.shape}")
     evaluated = infinite_horizon_point(instance, K)
-    if evaluated is None or not spectral_radius(instance.A + instance.B @ K) < 1.0:
-        raise ValueError(
-            f"start gain does not stabilize the instance (spectral radius "
-            f"{spectral_radius(instance.A + instance.B @ K):.6g}); the path needs a stabilizing start"
-        )
+    radius = spectral_radius(instance.A + instance.B @ K)
+    if evaluated is None or not is_stable(radius):
+        raise ValueError(f"start gain does not stabilize the instance ({unstable_note(radius)}); "
+                         "the path needs a stabilizing start")
 
     def solve(point, gamma, W):
         thresholds = gamma * W

@@ -20,7 +20,7 @@ from .design import (
     solver_status,
     vet_solver_cost,
 )
-from .status import NO_DESIGN, USABLE
+from .status import NO_DESIGN, STABILITY_TOL, USABLE
 from .evaluation import (
     Rollout,
     compare_exact_and_simulated,
@@ -50,6 +50,7 @@ __all__ = [
     "STATUSES",
     "USABLE",
     "NO_DESIGN",
+    "STABILITY_TOL",
     "SOLVER_STATUS",
     "INACCURATE_RTOL",
     "solver_status",

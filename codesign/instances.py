@@ -433,11 +433,51 @@ def _bridge_gaps(adj: np.ndarray, positions: np.ndarray) -> None:
             adj[left, right] = adj[right, left] = 1.0
 
 
-def _knn_graph(positions: np.ndarray, degree: int) -> np.ndarray:
+def _knn_neighbours(positions: np.ndarray, degree: int) -> np.ndarray:
+    """Each node's ``degree`` nearest positions (itself included), as ``(n, degree)`` indices.
+
+    The same sets as ``np.argsort(|x_i - x_j|, axis=1, kind="stable")[:, :degree]`` (ties to the
+    lower index), in O(n degree log degree) instead of O(n^2 log n): on a line a node's nearest
+    positions lie within ``degree - 1`` ranks of its own in the sorted order. That holds exactly
+    only where the nearest position just outside that window is strictly farther than the
+    ``degree``-th chosen (rounding keeps distances monotone along the line, but may tie them);
+    where it is not, the dense sort answers.
+    """
     n = positions.size
-    gaps = np.abs(positions[:, None] - positions[None, :])
-    # Stable sort so that a node is always among its own `degree` nearest (distance 0).
-    nearest = np.argsort(gaps, axis=1, kind="stable")[:, :degree]
+    order = np.argsort(positions, kind="stable")
+    rank = np.empty(n, dtype=np.intp)
+    rank[order] = np.arange(n)
+    offsets = np.arange(-(degree - 1), degree)
+    window = rank[:, None] + offsets[None, :]
+    inside = (window >= 0) & (window < n)
+    candidates = order[np.clip(window, 0, n - 1)]
+    gaps = np.where(inside, np.abs(positions[:, None] - positions[candidates]), np.inf)
+    chosen = np.lexsort((candidates, gaps), axis=-1)[:, :degree]
+    nearest = np.take_along_axis(candidates, chosen, axis=1)
+    kth = np.take_along_axis(gaps, chosen[:, -1:], axis=1)[:, 0]
+    for side in (-degree, degree):
+        beyond = rank + side
+        exists = (beyond >= 0) & (beyond < n)
+        outside = np.abs(positions - positions[order[np.clip(beyond, 0, n - 1)]])
+        if np.any(exists & (outside <= kth)):
+            return np.argsort(np.abs(positions[:, None] - positions[None, :]), axis=1, kind="stable")[:, :degree]
+    return nearest
+
+
+def _is_connected(nearest: np.ndarray) -> bool:
+    import scipy.sparse
+    from scipy.sparse.csgraph import connected_components
+
+    n, degree = nearest.shape
+    links = scipy.sparse.coo_matrix((np.ones(n * degree), (np.repeat(np.arange(n), degree), nearest.ravel())),
+                                    shape=(n, n))
+    return connected_components(links, directed=False, return_labels=False) == 1
+
+
+def _knn_graph(positions: np.ndarray, degree: int, nearest: np.ndarray | None = None) -> np.ndarray:
+    n = positions.size
+    if nearest is None:
+        nearest = _knn_neighbours(positions, degree)
     adj = np.zeros((n, n))
     rows = np.repeat(np.arange(n), degree)
     adj[rows, nearest.ravel()] = 1.0
@@ -490,6 +530,7 @@ def canonical_eigh(M: np.ndarray, *, rng: np.random.Generator | None = None,
 _BASIS_SALT = 0xBA515
 #: Draws of positions :func:`paper_instance` tries before it gives up on ``connect="redraw"``.
 #: At 500 nodes 1 draw in 34 is connected, so 1000 fail together with probability 1e-13;
+#: a draw costs about 2 ms at 3000 nodes (benchmarks/bench_redraw.py), so giving up takes seconds;
 #: at 1000 nodes none was in thousands.
 MAX_REDRAWS = 1000
 
@@ -545,18 +586,19 @@ def paper_instance(
         raise InstanceError(f"seed must be a non-negative integer, got {seed!r}")
     if connect not in CONNECT_RULES:
         raise InstanceError(f"connect must be one of {', '.join(CONNECT_RULES)}, got {connect!r}")
-    from scipy.sparse.csgraph import connected_components
-
     rng = np.random.default_rng(int(seed))
     for _ in range(MAX_REDRAWS):
         positions = rng.uniform(0.0, 1.0, n)
-        comm = _knn_graph(positions, degree)
+        # The neighbours on the sorted line and scipy's components on n * degree links, not the
+        # dense graph: a draw then costs milliseconds at 3000 nodes instead of 0.6 s, so the
+        # MAX_REDRAWS draws that end a hopeless redraw take seconds, not ten minutes.
+        nearest = _knn_neighbours(positions, degree)
         if connect == "bridge":
+            comm = _knn_graph(positions, degree, nearest)
             _bridge_gaps(comm, positions)
             break
-        # scipy's components, not networkx's: building a networkx graph from the dense
-        # adjacency takes most of a draw at 1000 nodes, and the test runs every draw.
-        if connected_components(comm, directed=False, return_labels=False) == 1:
+        if _is_connected(nearest):
+            comm = _knn_graph(positions, degree, nearest)
             break
     else:
         raise InstanceError(f"no connected {degree}-nearest-neighbour graph on {n} nodes in {MAX_REDRAWS} draws "

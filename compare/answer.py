@@ -2,6 +2,10 @@
 
 The sentences are chosen by rules, in this order (docs/reports.md, "The answer"):
 
+(0) **Budget ladder.** Where an experiment's spec asks for one (``[report] ladder``,
+    :mod:`compare.ladder`): whether some design within its first link budget comes within
+    ``near`` % of LQR on each system, then a list, one item per system, of each method's
+    best cost within every budget (the list is not counted among the sentences).
 (a) **Failures.** A method that diverges or fails (:data:`codesign.status.DIVERGED`,
     :data:`~codesign.status.FAILED`) on at least half of a panel's instances, or whose
     median best cost there is above :data:`FAILURE_COST` × LQR, while another design
@@ -27,14 +31,13 @@ The sentences are chosen by rules, in this order (docs/reports.md, "The answer")
     or more in what doing nothing (u = 0) costs over LQR: u = 0's cost at the easiest and
     hardest of them, and the gap at each.
 
-Rules (a) to (c) each add their sentences, (e) only where neither (b) nor (c) did, and
+Rules (0) and (a) to (c) each add their sentences, (e) only where none of (0), (b) and (c) did, and
 (d) follows the result of (c) or (e) it qualifies; the first :data:`MAX_SENTENCES` are kept.
 """
 
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -42,6 +45,8 @@ import numpy as np
 from codesign.status import DIVERGED, FAILED
 
 from .findings import ALPHA, BOUND_LABEL, Comparison, budgets_per_node, holm, sign_test
+from .ladder import ladder_lines
+from .names import short_names
 from .records import Records, as_records
 
 __all__ = ["answer_lines", "MAX_SENTENCES", "FAILURE_COST", "DIFFICULTY_RATIO", "pooled_tests", "Pooled"]
@@ -71,21 +76,6 @@ def _count_of(k: int, n: int) -> str:
 def _join(parts: Sequence[str]) -> str:
     parts = list(parts)
     return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
-
-
-#: A trailing parenthesis that names training settings, not the design: "(β path, 150 steps, 3 hops)".
-_SETTINGS = re.compile(r" \((β path|γ path|\d+ steps)[^()]*\)$")
-
-
-def _short_names(labels) -> dict[str, str]:
-    """Label -> its name without a trailing parenthesis of training settings ("GRNN-Sparse (β path)" ->
-    "GRNN-Sparse"), where that leaves no two labels of the report one name."""
-    labels = sorted(set(labels))
-    short = {x: _SETTINGS.sub("", x) for x in labels}
-    taken: dict[str, int] = {}
-    for x in short.values():
-        taken[x] = taken.get(x, 0) + 1
-    return {x: s if s == x or (taken[s] == 1 and s not in labels) else x for x, s in short.items()}
 
 
 def _times(cost: float) -> str:
@@ -149,7 +139,7 @@ def failure_sentences(records, names: Mapping[tuple, str], flagged: set | None =
     """
     flagged = set() if flagged is None else flagged
     records = as_records(records)
-    short = _short_names(records.by_label)
+    short = short_names(records.by_label)
     out = []
     for panel in sorted(records.by_panel, key=_panel_order):
         in_panel = records.by_panel[panel]
@@ -348,7 +338,7 @@ def pooled_sentence(comparisons: Sequence[Comparison], order: Mapping,
 
     best = min(tests, key=rank)
     c0 = best.cells[0]
-    short = _short_names({c.a for c in comparisons} | {c.b for c in comparisons})
+    short = short_names({c.a for c in comparisons} | {c.b for c in comparisons})
     a_side = best.a_wins == best.instances  # a costs less on every instance
     subject, other, word = c0.a, c0.b, "less" if a_side else "more"
     panels = sorted({c.panel for c in best.cells}, key=_panel_order)
@@ -463,7 +453,7 @@ def difficulty_sentence(records, cells: Sequence[Comparison], names: Mapping) ->
     c0 = cells[0]
     from .findings_text import _fmt
 
-    short = _short_names({c0.a, c0.b})
+    short = short_names({c0.a, c0.b})
     difference = f"{_subject(c0.a, short)} − {_subject(c0.b, short).removeprefix('the ')}"
 
     def share(p) -> str:
@@ -508,11 +498,12 @@ def answer_lines(records, comparisons: Sequence[Comparison], *, meta=None, membe
     for c in comparisons:
         order.setdefault((c.group, c.a, c.b), len(order))
     flagged: set = set()
-    sentences = failure_sentences(records, report_names, flagged)
+    ladder, ladder_details = ladder_lines(records, meta, members)
+    sentences = ladder + failure_sentences(records, report_names, flagged)
     reproduction = reproduction_sentences(records, meta, members)
     sentences += reproduction
     result = pooled_sentence(comparisons, order, flagged) if comparisons else None
-    if result is None and not reproduction and comparisons:
+    if result is None and not reproduction and not ladder and comparisons:
         result = claim_sentence(comparisons, order, cell_names)
     if result is not None:
         text, cells = result
@@ -521,4 +512,7 @@ def answer_lines(records, comparisons: Sequence[Comparison], *, meta=None, membe
         if context:
             sentences.append(context)
     sentences = sentences[:MAX_SENTENCES]
+    if ladder_details:  # the ladder's verdict, its list, then the other sentences
+        return sentences[:len(ladder)] + ["", *ladder_details, ""] + sentences[len(ladder):] + (
+            [""] if sentences[len(ladder):] else [])
     return sentences + [""] if sentences else []

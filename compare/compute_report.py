@@ -1,14 +1,16 @@
-"""What each method costs to run as the network grows: design seconds, scoring seconds and peak memory against N.
+"""What each method costs to run as the network grows: design seconds, scoring seconds and memory against N.
 
-The runner records every run's wall time and its worker process's peak resident
-memory (:func:`compare.runner.execute_run`), and every design records the
-seconds its method spent making it (:attr:`compare.records.DesignRecord.seconds`).
-A run's wall time is both: the method's own time (the sum of its designs'
-seconds) and the time spent scoring those designs (closed-form costs or
-simulation), which is the rest. This module keeps the two apart, per design,
-summarizes them per method label and number of nodes, fits how the method's own
-time grows where there are enough sizes to fit, and draws the figure of the
-``compute`` report section.
+The runner records every run's wall time, the seconds it spent scoring its designs
+(timed around the scoring calls, apart from the method's), and its worker process's
+resident memory at the start of the run and at its peak
+(:class:`compare.execution.RunResult`); every design records the seconds its method
+spent making it (:attr:`compare.records.DesignRecord.seconds`). This module
+summarizes them per method label and number of nodes (design and scoring seconds per
+design, the memory a run added over what its worker already held), fits how design
+time and memory grow where there are enough sizes to fit, states those growths in
+words, and draws the figure of the ``compute`` report section. Runs stored before
+scoring seconds and the memory baseline were recorded have them unknown: they are
+reported as not measured, never estimated from the wall time or the whole peak.
 """
 
 from __future__ import annotations
@@ -20,14 +22,16 @@ import numpy as np
 
 from .records import Records, as_records
 
-__all__ = ["ComputeCell", "compute_cells", "growth_exponent", "plot_compute", "compute_markdown",
-           "compute_section", "instances_per_size", "MIN_SIZES", "FEW_RUNS"]
+__all__ = ["ComputeCell", "compute_cells", "growth_exponent", "growth_sentences", "plot_compute", "compute_markdown",
+           "compute_section", "instances_per_size", "MIN_SIZES", "FEW_RUNS", "NOT_MEASURED"]
 
 #: Sizes a method needs timings at before a growth exponent is fitted: through three points
 #: almost any curve looks like a power law, and a slope through two is no fit at all.
 MIN_SIZES = 4
 #: A cell resting on fewer completed runs than this is drawn hollow and annotated with its run count.
 FEW_RUNS = 3
+#: What the figure and the notes say of a quantity the report's runs did not record.
+NOT_MEASURED = "not measured in this report's runs"
 
 
 @dataclass(frozen=True)
@@ -51,12 +55,18 @@ class ComputeCell:
         run's designs' ``seconds`` over its number of designs (NaN if none completed, or
         if no design recorded its seconds).
     scoring_seconds : float
-        Median over completed runs of the scoring seconds per design: the run's wall
-        seconds minus its designs' seconds (never below 0), over its number of designs.
+        Median over completed runs of the scoring seconds per design: the seconds the run
+        spent scoring its designs, as measured around those calls, over its number of
+        designs (NaN where no completed run has them measured: runs stored before they were).
     seconds_per_run : float
         Median over completed runs of the run's wall seconds (designing and scoring).
     peak_mb : float
-        Largest peak resident memory of the worker process over the runs (MB; NaN if unknown).
+        Largest peak resident memory of the worker process over the runs (MB; NaN if unknown),
+        everything the process held included.
+    memory_mb : float
+        Median over completed runs of the memory the run added: its process's peak resident
+        memory less the resident memory it started the run from (MB; NaN where no completed
+        run has both measured).
     why_not : str
         The message of a run with no usable design (e.g. a size guard), else "".
     """
@@ -69,6 +79,7 @@ class ComputeCell:
     scoring_seconds: float
     seconds_per_run: float
     peak_mb: float
+    memory_mb: float = math.nan
     why_not: str = ""
 
 
@@ -77,19 +88,31 @@ def _nodes(record) -> int:
     return record.instance.nodes or 0
 
 
+def _added_mb(record) -> float | None:
+    """The memory the record's run added (its peak less its start, MB), None where either is unknown."""
+    if record.run_peak_mb is None or record.run_baseline_mb is None:
+        return None
+    return float(record.run_peak_mb) - float(record.run_baseline_mb)
+
+
 def _runs(records: Records) -> dict[tuple, dict]:
-    """(label, n, run key) -> what the run cost: wall seconds, designs, their seconds, peak, outcome."""
+    """(label, n, run key) -> what the run cost: wall and scoring seconds, designs, their seconds, memory, outcome."""
     runs: dict[tuple, dict] = {}
     for r in records:
         run = runs.setdefault((r.label, _nodes(r), r.run_key),
                               {"ok": False, "seconds": r.run_seconds, "designs": r.run_designs,
-                               "design_seconds": 0.0, "timed_designs": 0, "peak": r.run_peak_mb,
-                               "message": "", "refused": False})
+                               "design_seconds": 0.0, "timed_designs": 0, "scoring": r.run_scoring_seconds,
+                               "peak": r.run_peak_mb, "added": _added_mb(r), "message": "", "refused": False})
         run["ok"] |= r.ok
         run["refused"] |= bool(r.extras.get("size_guard"))
         if r.seconds is not None and math.isfinite(r.seconds):
             run["design_seconds"] += float(r.seconds)
             run["timed_designs"] += 1
+        # A learned method simulates its designs to precision itself, after its timer stops, and the
+        # harness then has nothing left to score: that simulation is the design's scoring.
+        own = r.extras.get("scoring_seconds")
+        if run["scoring"] is not None and isinstance(own, (int, float)) and math.isfinite(own):
+            run["scoring"] += float(own)
         if not r.ok and r.message and not run["message"]:
             run["message"] = r.message
     return runs
@@ -107,16 +130,17 @@ def compute_cells(records) -> list[ComputeCell]:
     out = []
     for (label, n), group in sorted(cells.items()):
         done = [g for g in group if g["ok"] and not g["refused"] and g["seconds"] is not None]
-        # A batched run's wall seconds are its batch's share, as are its designs' seconds, so the
-        # difference is still this run's scoring; timer noise can make it slightly negative.
         per = [max(g["designs"] or 1, 1) for g in done]
         design = [g["design_seconds"] / k for g, k in zip(done, per) if g["timed_designs"]]
-        scoring = [max(g["seconds"] - g["design_seconds"], 0.0) / k for g, k in zip(done, per) if g["timed_designs"]]
+        # Measured, never the wall time less the designs' seconds: a path's designs can record more
+        # seconds than its run took (a shared computation counted in two of them).
+        scoring = [g["scoring"] / k for g, k in zip(done, per) if g["scoring"] is not None]
         peaks = [g["peak"] for g in group if g["peak"] is not None]
         failed = [g["message"] for g in group if (g["refused"] or not g["ok"]) and g["message"]]
         out.append(ComputeCell(label, n, len(group), len(done), _median(design), _median(scoring),
                                _median([g["seconds"] for g in done]), float(max(peaks)) if peaks else math.nan,
-                               failed[0] if failed else ""))
+                               memory_mb=_median([g["added"] for g in done if g["added"] is not None]),
+                               why_not=failed[0] if failed else ""))
     return out
 
 
@@ -137,21 +161,79 @@ def growth_exponent(ns, seconds, *, min_sizes: int = MIN_SIZES) -> float | None:
     return float(np.polyfit(x, y, 1)[0])
 
 
+def _exponent(cells, value: str = "design_seconds") -> float | None:
+    """:func:`growth_exponent` of the cells' ``value`` (a :class:`ComputeCell` field) against their N."""
+    known = [c for c in cells if c.completed and math.isfinite(getattr(c, value))]
+    return growth_exponent([c.n for c in known], [getattr(c, value) for c in known])
+
+
 def _design_exponent(cells) -> float | None:
-    timed = [c for c in cells if math.isfinite(c.design_seconds)]
-    return growth_exponent([c.n for c in timed], [c.design_seconds for c in timed])
+    return _exponent(cells, "design_seconds")
 
 
-def _exponent_text(cells) -> str:
-    """The table's growth column: the fitted k, or why there is none."""
-    slope = _design_exponent(cells)
+#: What :func:`_growth_text` calls a quantity with no measurable value: ComputeCell field -> words.
+_NOTHING_MEASURABLE = {"design_seconds": "no measurable design time", "memory_mb": "no measurable memory added"}
+
+
+def _growth_text(cells, value: str = "design_seconds") -> str:
+    """The table's growth column for ``value``: the fitted k, or why there is none."""
+    slope = _exponent(cells, value)
     if slope is not None:
         return f"{slope:.2f}"
-    timed = {c.n for c in cells if math.isfinite(c.design_seconds)}
-    if timed and not any(c.design_seconds > 0 for c in cells if math.isfinite(c.design_seconds)):
-        return "no measurable design time"
-    positive = {c.n for c in cells if math.isfinite(c.design_seconds) and c.design_seconds > 0}
+    known = [getattr(c, value) for c in cells if c.completed and math.isfinite(getattr(c, value))]
+    if not known:
+        return "not measured" if any(c.completed for c in cells) else "too few sizes (0)"
+    if not any(v > 0 for v in known):
+        return _NOTHING_MEASURABLE[value]
+    positive = {c.n for c in cells if c.completed and math.isfinite(getattr(c, value)) and getattr(c, value) > 0}
     return f"too few sizes ({len(positive)})"
+
+
+def _growth_phrase(text: str) -> str:
+    """What :func:`_growth_text` found, as the end of a sentence about a quantity: "grows as N^k", or why not."""
+    try:
+        return f"grows as N^{float(text):.1f}"
+    except ValueError:
+        pass
+    if text == "not measured":
+        return f"was {NOT_MEASURED}"
+    if text in _NOTHING_MEASURABLE.values():
+        return "is too small to measure"
+    return f"is measurable at {text} to fit"  # "too few sizes (k)"
+
+
+def growth_sentences(cells) -> list[str]:
+    """How design time and memory grow with N, in words, for each method completed at :data:`MIN_SIZES` or more sizes.
+
+    Parameters
+    ----------
+    cells : list of ComputeCell
+
+    Returns
+    -------
+    list of str
+        Markdown lines: an introduction and one bullet per such method ("design time grows
+        as N^k; memory added grows as N^m", or why a growth is not fitted), then one line naming
+        the methods completed at fewer sizes; empty when no method has the sizes.
+    """
+    by_label: dict[str, list] = {}
+    for c in cells:
+        by_label.setdefault(c.label, []).append(c)
+    sized = {label: sorted(group, key=lambda c: c.n) for label, group in sorted(by_label.items())}
+    fitted = {label: group for label, group in sized.items()
+              if len({c.n for c in group if c.completed}) >= MIN_SIZES}
+    if not fitted:
+        return []
+    intro = (f"How each method's cost grows with N, where it completed runs at {MIN_SIZES} or more sizes (the slope "
+             "k of a least-squares fit of the log of the median against log N, so that the value grows as N^k):")
+    lines = [intro, ""]
+    for label, group in fitted.items():
+        lines.append(f"- {label}: design time {_growth_phrase(_growth_text(group, 'design_seconds'))}; "
+                     f"memory added {_growth_phrase(_growth_text(group, 'memory_mb'))}.")
+    fewer = [label for label in sized if label not in fitted]
+    if fewer:
+        lines += ["", f"Completed at fewer than {MIN_SIZES} sizes, so no growth is stated: {', '.join(fewer)}."]
+    return lines
 
 
 def _resolve_styles(labels, styles, records=None) -> dict:
@@ -248,7 +330,10 @@ def _grouped_legend_entries(labels, styles, names: dict) -> tuple[list, list, in
 
 
 def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dict | None = None):
-    """Design seconds per design, scoring seconds per design and peak memory against N, log-log.
+    """Design seconds per design, scoring seconds per design and the memory a run added against N, log-log.
+
+    A panel whose quantity no completed run measured (runs stored before it was recorded)
+    says so (:data:`NOT_MEASURED`) instead of drawing anything.
 
     Parameters
     ----------
@@ -265,7 +350,7 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
     -------
     fig, axes
     """
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator
 
     from .figures import plt
 
@@ -283,11 +368,18 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
     # Where every point rests on the same few runs, the title says so once instead of a label at each point.
     run_counts = {c.completed for c in cells if c.completed} | {c.runs for c in cells}
     uniform = len(run_counts) == 1 and min(run_counts) < FEW_RUNS
+    empty = []  # panels of a quantity these runs did not measure
     for ax, value, count in ((design_ax, "design_seconds", "completed"), (scoring_ax, "scoring_seconds", "completed"),
-                             (memory_ax, "peak_mb", "runs")):
+                             (memory_ax, "memory_mb", "completed")):
+        if any(c.completed for c in cells) and not any(c.completed and math.isfinite(getattr(c, value))
+                                                       for c in cells):
+            ax.text(0.5, 0.5, NOT_MEASURED, transform=ax.transAxes, ha="center", va="center", fontsize=9,
+                    color="0.35", gid=f"not-measured:{value}")
+            empty.append(ax)
+            continue
         series = {}
         for label in labels:
-            # A log axis cannot show 0 s (scoring that took no measurable time): such points are left out.
+            # A log axis cannot show 0 (scoring or memory too small to measure): such points are left out.
             points = [c for c in by_label[label] if math.isfinite(getattr(c, value)) and getattr(c, value) > 0]
             if points:
                 series[label] = ([c.n for c in points], [getattr(c, value) for c in points],
@@ -309,13 +401,16 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
     design_ax.set_ylabel("method's own seconds per design (median over runs; 1 core)")
     design_ax.set_title("Design time per design")
     scoring_ax.set_ylabel("scoring seconds per design (median over runs)")
-    scoring_ax.set_title("Scoring time per design (instance, cost evaluation, simulation)")
-    memory_ax.set_ylabel("peak resident memory of the worker (MB)")
-    memory_ax.set_title("Peak memory per run (largest over runs)")
-    # Memory spans less than a decade or two: label 1-2-5 steps in plain MB, not one power of ten.
+    scoring_ax.set_title("Scoring time per design (cost evaluation, simulation)")
+    memory_ax.set_ylabel("memory added by a run: its peak above its start (MB, median over runs)")
+    memory_ax.set_title("Memory added per run (peak less the worker's baseline)")
+    # Label 1-2-5 steps in plain MB, not one power of ten: megabytes are read as numbers.
     memory_ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
     memory_ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
     memory_ax.yaxis.set_minor_formatter(NullFormatter())
+    for ax in empty:  # the sizes' range, as the drawn panels have it, and no values on an axis with none
+        ax.set_xlim(sizes[0] / 1.25, sizes[-1] * 1.25)
+        ax.yaxis.set_major_locator(NullLocator())
     few = (f"every point rests on {min(run_counts)} run{'s' if min(run_counts) != 1 else ''} (hollow markers)"
            if uniform else f"hollow marker: fewer than {FEW_RUNS} runs behind it")
     fig.suptitle("Compute against network size (" + (f"{_instances_text(instances)}; " if instances else "")
@@ -328,6 +423,13 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
     return fig, axes
 
 
+def _fmt_mb(value: float) -> str:
+    """Megabytes as the table gives them: whole above 10 MB, else two significant digits; ? if unknown."""
+    if not math.isfinite(value):
+        return "?"
+    return f"{value:.0f}" if abs(value) >= 10 else f"{value:.2g}"
+
+
 def _fmt_seconds(value: float) -> str:
     if not math.isfinite(value):
         return "?"
@@ -336,14 +438,35 @@ def _fmt_seconds(value: float) -> str:
     return f"{value:.3g}" if value < 100 else f"{value:.0f}"
 
 
+def _not_measured_note(cells) -> str:
+    """The note under the table for the "?" of scoring seconds and memory added that runs did not measure, or ""."""
+    done = [c for c in cells if c.completed]
+    missing = {what: [not math.isfinite(getattr(c, value)) for c in done]
+               for what, value in (("scoring seconds", "scoring_seconds"), ("memory added", "memory_mb"))}
+    missing = {what: flags for what, flags in missing.items() if any(flags)}
+    if not missing:
+        return ""
+    # A store can mix runs from before the measurements with later ones: then only some cells lack them.
+    everywhere = all(all(flags) for flags in missing.values())
+    where = NOT_MEASURED if everywhere else "not measured in some of this report's runs"
+    return (f"? : {' and '.join(missing)} {'were' if len(missing) > 1 else 'was'} {where} (runs stored before "
+            "they were recorded, or memory on a platform without Linux's /proc); they are not estimated from the "
+            "wall time or the whole peak.")
+
+
 def compute_markdown(cells) -> str:
-    """The compute table: per method and N, design and scoring seconds per design, peak memory and runs timed."""
+    """The compute table: per method and N, design and scoring seconds per design, memory added and runs timed.
+
+    A value the runs did not measure is "?", and a note under the table says which
+    (scoring seconds and memory added are not recorded in stores and report folders
+    written before them).
+    """
     sizes = sorted({c.n for c in cells})
     labels = sorted({c.label for c in cells})
     by = {(c.label, c.n): c for c in cells}
-    head = ("| method | " + " | ".join(f"N = {n}: design s, scoring s, MB (runs)" for n in sizes)
-            + " | design time ∝ N^k |")
-    lines = [head, "|---|" + "---|" * (len(sizes) + 1)]
+    head = ("| method | " + " | ".join(f"N = {n}: design s, scoring s, MB added (runs)" for n in sizes)
+            + " | design time ∝ N^k | memory added ∝ N^m |")
+    lines = [head, "|---|" + "---|" * (len(sizes) + 2)]
     notes = {}
     for label in labels:
         row = [label]
@@ -359,12 +482,15 @@ def compute_markdown(cells) -> str:
                 row.append(f"none of {c.runs} runs completed")
                 continue
             timed.append(c)
-            mb = f"{c.peak_mb:.0f}" if math.isfinite(c.peak_mb) else "?"
+            mb = _fmt_mb(c.memory_mb)
             runs = f"{c.completed}" if c.completed == c.runs else f"{c.completed} of {c.runs} completed"
             row.append(f"{_fmt_seconds(c.design_seconds)}, {_fmt_seconds(c.scoring_seconds)}, {mb} ({runs})")
-        row.append(_exponent_text(timed))
+        row += [_growth_text(timed, "design_seconds"), _growth_text(timed, "memory_mb")]
         lines.append("| " + " | ".join(row) + " |")
     text = "\n".join(lines)
+    note = _not_measured_note(cells)
+    if note:
+        text += "\n\n" + note
     if notes:
         text += "\n\nRuns that did not complete (no usable design, or refused by a size guard):\n\n" + "\n".join(
             f"- {label}, N = {n}: {c.runs - c.completed} of {c.runs}" + (f": {c.why_not[:200]}" if c.why_not else "")
@@ -386,26 +512,34 @@ def _caption(instances: dict) -> str:
         "seconds per design, log–log: "
         "for each run the sum of its designs' recorded seconds divided by the designs it returned (a γ or β path "
         "returns one per weight; batched learned runs share their batch's time equally), the median over runs. "
-        "Middle: the scoring seconds per design, the rest of the run's wall time (building the instance, its "
-        "Riccati solve included, and computing each design's cost: closed form for linear controllers, "
-        "simulation for learned ones), per design and median over runs. A "
-        "median of 0 s (a method that takes no measurable time, such as doing nothing) cannot be drawn on a "
-        "log axis and is only in the table. Right: the largest peak "
-        "resident memory of the worker process during a run, which includes the interpreter and the loaded "
-        "libraries (about 300 MB once torch is loaded) but not memory that earlier runs in the same worker "
-        "freed (it is handed back to the system before each run). Only runs with at least one usable design "
+        "Middle: the scoring seconds per design, timed around the harness's scoring of the designs a method "
+        "returned (codesign.scoring.evaluate), per design and median over runs. A design that comes back already "
+        "scored keeps its cost: an exact cost a method computed is in its own seconds, and the learned methods "
+        "simulate their designs to the harness's precision inside their call, after their training's timer "
+        "stops; they record that simulation's seconds, and this panel adds them to the harness's. The rest of a "
+        "run's wall time (building its instance) is in neither panel. A "
+        "median of 0 (a method that takes no measurable time, such as doing nothing) cannot be drawn on a "
+        "log axis and is only in the table. Right: the memory a run added, its worker's peak resident memory "
+        "during the run less the worker's resident memory when the run started (the interpreter, the libraries "
+        "loaded so far and what earlier runs kept; memory they freed is handed back to the system first), "
+        "median over runs; the runs of one batch share one start and one peak, and a run that is the first in "
+        "its worker to load a library counts the library. Only runs with at least one usable design "
         "and none refused by a size guard are timed; a size where none was is absent from the figure (see the "
         f"table). A hollow marker, annotated with its count, rests on fewer than {FEW_RUNS} runs. The legend "
         "groups methods by information model (its line style heads each column) and gives, where a method has "
         f"design timings at {MIN_SIZES} or more sizes, the slope k of a least-squares fit of log design time "
-        f"against log N (time ∝ N^k); with fewer sizes no growth is fitted (\"too few sizes\" in the table). "
-        "Table cells: design seconds per design, scoring seconds per design, peak MB, and in parentheses the "
-        "runs behind the seconds."
+        f"against log N (time ∝ N^k); with fewer sizes no growth is fitted (\"too few sizes\" in the table), "
+        "and the table's last column fits the memory added alike. "
+        "Table cells: design seconds per design, scoring seconds per design, MB added, and in parentheses the "
+        "runs behind them."
     )
 
 
 def compute_section(records: Records, save, styles: dict) -> list[str]:
     """The report's ``compute`` section: the figure (saved with ``save(fig, stem)``, as the other sections) and the table.
+
+    Above the figure, :func:`growth_sentences` state how each method's design time and memory
+    grow with N where it completed runs at :data:`MIN_SIZES` or more sizes.
 
     ``styles``: label -> :class:`compare.styles.Style`; labels it lacks (or gives as an older
     (colour, marker) pair) are styled by :func:`compare.styles.label_styles` of ``records``.
@@ -418,9 +552,11 @@ def compute_section(records: Records, save, styles: dict) -> list[str]:
     resolved = _resolve_styles(sorted({c.label for c in cells}), styles, records)
     fig, _ = plot_compute(cells, styles=resolved, instances=instances)
     save(fig, "compute")
+    growth = growth_sentences(cells)
     return [
         "## Compute against network size",
         "",
+        *(growth + [""] if growth else []),
         "![compute](compute.png)",
         "",
         _caption(instances),

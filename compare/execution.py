@@ -1,10 +1,12 @@
 """Executing runs in this process: what a worker does with a task, and what it measures.
 
 :func:`execute_task` runs a task (runs of one method; a batched method designs them
-in one call) and returns, run by run, the scored designs, the wall seconds and the
-peak resident memory. Any exception, or a method's ``sys.exit``, becomes that run's
-``failed`` design. Worker processes (:mod:`compare.pool`, or a dask worker) call it
-after :func:`_limit_threads`; :mod:`compare.runner` calls it directly with one worker.
+in one call) and returns, run by run, a :class:`RunResult`: the scored designs, the
+wall seconds, the seconds spent scoring the designs, and the process's resident
+memory at the start of the run and at its peak. Any exception, or a method's
+``sys.exit``, becomes that run's ``failed`` design. Worker processes
+(:mod:`compare.pool`, or a dask worker) call it after :func:`_limit_threads`;
+:mod:`compare.runner` calls it directly with one worker.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import time
 import warnings
 from contextlib import contextmanager
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 
@@ -27,7 +30,7 @@ from .registry import get_method
 from .spec import Run
 
 __all__ = ["build_instance", "instance_facts", "execute_run", "execute_task", "execute_task_sendable", "failed_run",
-           "unsendable", "sendable_results", "reissue_warnings", "ExecutorError", "WorkerSetupError"]
+           "unsendable", "sendable_results", "reissue_warnings", "RunResult", "ExecutorError", "WorkerSetupError"]
 
 # RAYON_NUM_THREADS: Clarabel's faer factorization runs on a rayon pool that otherwise takes every
 # core (seen: SLS at N = 100 kept a second thread busy, so two workers ran three threads on 2 cores).
@@ -60,9 +63,58 @@ def instance_facts(instance) -> dict:
             "drawing": drawing_facts(instance)}
 
 
-def _evaluated(instance, designs, evaluation) -> list[Design]:
-    return [evaluate(instance, d, validation_size=evaluation.validation_size, noise_std=evaluation.noise_std)
-            for d in designs]
+class RunResult(NamedTuple):
+    """What a run gives back: its designs and what the run cost.
+
+    ``record(run, *result)`` passes the fields in this order (:mod:`compare.runner`,
+    :mod:`compare.pool`). The measurements are None where unknown: a run that ended
+    its worker or its time limit, or a platform without Linux's ``/proc`` for memory.
+
+    Attributes
+    ----------
+    designs : list of Design
+        The scored designs (or the one ``failed`` design saying why there are none).
+    seconds : float
+        Wall seconds of the run: building the instance, the method's call and the
+        scoring. A batched run's is an equal share of its batch's.
+    peak_mb : float or None
+        The process's peak resident memory (MB) during the run, everything it held included.
+    scoring_seconds : float or None
+        Seconds spent scoring the designs (:func:`codesign.scoring.evaluate`), timed around
+        those calls alone; 0 where the method failed before any design was scored.
+    baseline_mb : float or None
+        The process's resident memory (MB) when the run started, after the peak was reset:
+        the interpreter and the libraries loaded so far. ``peak_mb - baseline_mb`` is what
+        the run itself added.
+    """
+
+    designs: list
+    seconds: float
+    peak_mb: float | None = None
+    scoring_seconds: float | None = None
+    baseline_mb: float | None = None
+
+
+class _Stopwatch:
+    """Seconds spent inside ``with watch:`` blocks, added up (also when a block raises)."""
+
+    def __init__(self):
+        self.seconds = 0.0
+
+    def __enter__(self):
+        self._start = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc):
+        self.seconds += time.perf_counter() - self._start
+        return False
+
+
+def _evaluated(instance, designs, evaluation, watch: _Stopwatch) -> list[Design]:
+    """The designs scored as the harness scores them; the time the scoring takes goes on ``watch``."""
+    with watch:
+        return [evaluate(instance, d, validation_size=evaluation.validation_size, noise_std=evaluation.noise_std)
+                for d in designs]
 
 
 def _failed(run: Run, exc: BaseException) -> list[Design]:
@@ -76,18 +128,18 @@ def failed_run(run: Run, message: str, extras: dict | None = None) -> list[Desig
     return [Design.failure(run.method, run.params, FAILED, message, extras=dict(extras or {}))]
 
 
-def unsendable(run: Run, result: tuple, exc: Exception) -> tuple:
-    """The result recorded for a run whose designs cannot leave its worker (they do not pickle)."""
-    _, seconds, peak_mb = result
-    return (failed_run(run, f"its design could not be sent back from the worker process "
-                            f"({type(exc).__name__}: {exc}); a method's designs must pickle"), seconds, peak_mb)
+def unsendable(run: Run, result: tuple, exc: Exception) -> RunResult:
+    """The result recorded for a run whose designs cannot leave its worker (they do not pickle); its timings kept."""
+    return RunResult(*result)._replace(designs=failed_run(
+        run, f"its design could not be sent back from the worker process ({type(exc).__name__}: {exc}); "
+             "a method's designs must pickle"))
 
 
-def unstorable(run: Run, result: tuple, exc: Exception) -> tuple:
+def unstorable(run: Run, result: tuple, exc: Exception) -> RunResult:
     """The result recorded for a run whose designs the store cannot hold (params or extras not JSON)."""
-    _, seconds, peak_mb = result
-    return (failed_run(run, f"its design could not be stored ({type(exc).__name__}: {exc}); a method's params "
-                            "and extras must hold numbers, strings, lists and dicts only"), seconds, peak_mb)
+    return RunResult(*result)._replace(designs=failed_run(
+        run, f"its design could not be stored ({type(exc).__name__}: {exc}); a method's params "
+             "and extras must hold numbers, strings, lists and dicts only"))
 
 
 def _sendable(run: Run, result: tuple) -> bytes:
@@ -185,23 +237,39 @@ def _reset_peak_memory() -> bool:
         return False
 
 
-def _peak_memory_mb() -> float | None:
-    """This process's peak resident memory (MB) since the last reset, or None if unknown."""
+def _status_mb(field: str) -> float | None:
+    """A memory line of this process's ``/proc/self/status`` (``VmHWM``, ``VmRSS``) in MB, or None if unknown."""
     try:
         with open(_STATUS_FILE) as f:
             for line in f:
-                if line.startswith("VmHWM:"):
+                if line.startswith(field + ":"):
                     return int(line.split()[1]) / 1024.0
     except (OSError, ValueError, IndexError):
         pass
     return None
 
 
+def _peak_memory_mb() -> float | None:
+    """This process's peak resident memory (MB) since the last reset, or None if unknown."""
+    return _status_mb("VmHWM")
+
+
+def _resident_memory_mb() -> float | None:
+    """This process's resident memory (MB) now, or None if unknown."""
+    return _status_mb("VmRSS")
+
+
 @contextmanager
 def _measured():
-    """Wall seconds and peak resident memory (MB, None if unknown) of the block: ``with _measured() as m``."""
-    watch = {"peak_mb": None}
+    """Wall seconds, and resident memory (MB, None if unknown) at the start and at the peak, of the block.
+
+    ``with _measured() as m``: then ``m["seconds"]``, ``m["baseline_mb"]`` (what the process
+    held when the block started, read just after the peak was reset to it) and ``m["peak_mb"]``.
+    """
+    watch = {"peak_mb": None, "baseline_mb": None}
     tracked = _reset_peak_memory()
+    if tracked:
+        watch["baseline_mb"] = _resident_memory_mb()
     start = time.perf_counter()
     try:
         yield watch
@@ -210,34 +278,37 @@ def _measured():
         watch["peak_mb"] = _peak_memory_mb() if tracked else None
 
 
-def execute_run(run: Run) -> tuple[list[Design], float, float | None]:
+def execute_run(run: Run) -> RunResult:
     """Run one method on one instance and score its designs; any exception becomes a ``failed`` design.
 
-    Returns the designs, the wall seconds and the process's peak resident memory
-    during the run in MB (None where the platform cannot reset the peak: Linux's
-    ``/proc/self/clear_refs`` is used). The peak includes what the worker process
-    already held (the interpreter and the loaded libraries), not what earlier runs
-    freed (returned to the system first, see :func:`_release_freed_memory`).
+    Returns the :class:`RunResult`: the designs, the wall seconds, the seconds spent
+    scoring the designs (timed around the scoring calls, apart from the method's), and
+    the process's resident memory in MB at the start of the run and at its peak (None
+    where the platform cannot reset the peak: Linux's ``/proc/self/clear_refs`` is
+    used). Both include what the worker process already held (the interpreter and the
+    libraries loaded so far), not what earlier runs freed (returned to the system
+    first, see :func:`_release_freed_memory`); their difference is what the run added.
     """
+    scoring = _Stopwatch()
     with _measured() as m:
         try:
             instance = build_instance(run.instance)
-            designs = _evaluated(instance, get_method(run.method)(instance, **run.params), run.evaluation)
+            designs = _evaluated(instance, get_method(run.method)(instance, **run.params), run.evaluation, scoring)
         except (Exception, SystemExit) as exc:  # a failing method is a recorded status, never a crashed sweep
             designs = _failed(run, exc)
-    return designs, m["seconds"], m["peak_mb"]
+    return RunResult(designs, m["seconds"], m["peak_mb"], scoring.seconds, m["baseline_mb"])
 
 
-def execute_task(runs: list[Run], plugins=()) -> list[tuple[list[Design], float, float | None]]:
+def execute_task(runs: list[Run], plugins=()) -> list[RunResult]:
     """Run a group of runs of one method; a batched method designs them in one call.
 
     ``plugins`` are imported first (once per process), so that worker processes
-    know the same user methods as the process that planned the runs. Returns
-    ``(designs, seconds)`` per run, in order; the seconds of a batched call are
-    shared equally. If the batched call fails as a whole, each run is retried
-    alone so that one bad run cannot fail its neighbours. Each result is
-    ``(designs, seconds, peak_mb)`` as :func:`execute_run` gives it; the runs of a
-    batched call share its peak memory.
+    know the same user methods as the process that planned the runs. Returns a
+    :class:`RunResult` per run, in order, as :func:`execute_run` gives it. If the
+    batched call fails as a whole, each run is retried alone so that one bad run
+    cannot fail its neighbours. The runs of a batched call share its wall seconds
+    equally (the method designs them together) and its memory baseline and peak;
+    each run's scoring seconds are its own, since its designs are scored apart.
     """
     try:
         load_plugins(plugins)
@@ -250,17 +321,20 @@ def execute_task(runs: list[Run], plugins=()) -> list[tuple[list[Design], float,
         ) from None
     if len(runs) == 1 or method.batch is None:
         return [execute_run(run) for run in runs]
+    scoring = [_Stopwatch() for _ in runs]
     with _measured() as m:
         try:
             instances = [build_instance(run.instance) for run in runs]
             results = method.run_batch([(inst, run.params) for inst, run in zip(instances, runs)])
-            results = [_evaluated(inst, designs, run.evaluation) for inst, designs, run in zip(instances, results, runs)]
+            results = [_evaluated(inst, designs, run.evaluation, watch)
+                       for inst, designs, run, watch in zip(instances, results, runs, scoring)]
         except (Exception, SystemExit):
             results = None
     if results is None:
         return [execute_run(run) for run in runs]
     share = m["seconds"] / len(runs)
-    return [(designs, share, m["peak_mb"]) for designs in results]
+    return [RunResult(designs, share, m["peak_mb"], watch.seconds, m["baseline_mb"])
+            for designs, watch in zip(results, scoring)]
 
 
 _LIMITS = []  # the worker's threadpoolctl limits, kept for the process's lifetime

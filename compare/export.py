@@ -12,8 +12,11 @@
 * the outcome: ``cost``, ``cost_stderr``, ``cost_kind``, ``links``,
   ``self_loops``, ``info_model``, ``status``, ``message``, ``seconds``,
   ``controller_kind``, ``fingerprint``, and of the run that made it: ``run_seconds``
-  (wall time, scoring included), ``run_designs`` and ``run_peak_mb`` (its process's
-  peak resident memory, MB);
+  (wall time, scoring included), ``run_designs``, ``run_peak_mb`` (its process's
+  peak resident memory, MB), ``run_scoring_seconds`` (the part of the wall time spent
+  scoring its designs) and ``run_baseline_mb`` (the resident memory its process started
+  the run from, MB: ``run_peak_mb - run_baseline_mb`` is what the run added); empty
+  where unknown, as in stores written before the last two were recorded;
 * one column per hyperparameter found in any design (``gamma``, ``beta``,
   ``steps``, ...), empty (NaN) where a design has none. A hyperparameter is
   ``param_<name>`` when its name is another column of this table, ``params``, or
@@ -56,7 +59,8 @@ FORMATS = {"csv": "designs.csv", "parquet": "designs.parquet"}
 _IDENTITY = ("experiment", "experiments", "run_key", "idx", "method", "label")
 _INSTANCE_ORDER = ("family", "n", "degree", "a_norm", "b_norm", "hops", "horizon", "seed")
 _OUTCOME = ("cost", "cost_stderr", "cost_kind", "links", "self_loops", "info_model", "status", "message",
-            "seconds", "controller_kind", "fingerprint", "run_seconds", "run_designs", "run_peak_mb")
+            "seconds", "controller_kind", "fingerprint", "run_seconds", "run_designs", "run_peak_mb",
+            "run_scoring_seconds", "run_baseline_mb")
 _INSTALL = "pip install -e \".[analysis]\" (from a checkout) or pip install \"grnn-codesign[analysis]\""
 
 
@@ -175,7 +179,8 @@ def designs_frame(records, members: dict | None = None):
     for key in instance_keys:
         columns[key] = _column(pd, [r.instance.spec.get(key) for r in records], numbers="int")
     for key in _OUTCOME:
-        numbers = "float" if key in ("cost", "cost_stderr", "seconds", "run_seconds", "run_peak_mb") else "int"
+        numbers = "float" if key in ("cost", "cost_stderr", "seconds", "run_seconds", "run_peak_mb",
+                                     "run_scoring_seconds", "run_baseline_mb") else "int"
         columns[key] = _column(pd, [getattr(r, key) for r in records], numbers=numbers)
     for key, name in param_columns.items():
         columns[name] = _column(pd, [r.params.get(key) for r in records], numbers="float")

@@ -8,7 +8,11 @@ from is written into its folder as plain files, losslessly:
     (readers of those keep working), then ``instance`` (the canonical JSON of the
     instance spec), the instance facts (``instance_nodes``, ``plant_links``,
     ``comm_links``), ``experiment``, ``controller_kind`` and the timings of the run
-    that made the design (``run_seconds``, ``run_designs``, ``run_peak_mb``).
+    that made the design (``run_seconds``, ``run_designs``, ``run_peak_mb``); after
+    them the instance facts added later (``nodes``, ``inputs``, ``actuated_nodes``,
+    ``open_loop_radius``) and the run's measurements added later
+    (``run_scoring_seconds``, ``run_baseline_mb``), each only where some design has it,
+    so that a folder written before them is rewritten byte for byte.
     Floats are written with ``repr``, so they read back exactly; ``extras`` holds
     the scalar extras as JSON.
 ``curves.csv``
@@ -65,6 +69,9 @@ _TEXT = ("label", "method", "status", "cost_kind", "info_model", "message", "run
          "controller_kind")
 #: DesignRecord fields written as numbers ('' = None); ints stay ints, floats floats.
 _NUMBERS = ("cost", "cost_stderr", "links", "self_loops", "seconds", "run_seconds", "run_designs", "run_peak_mb")
+#: Run measurements added later (DesignRecord fields, numbers), written last when some design has them;
+#: a folder written before them has none, and its records read them as None (unknown).
+_LATER_RUN_COLUMNS = ("run_scoring_seconds", "run_baseline_mb")
 #: Instance facts: runs.csv column -> InstanceRecord attribute and the key the runner stores it under.
 _FACTS = {"instance_nodes": "n", "plant_links": "plant_links", "comm_links": "comm_links"}
 #: Facts added later, written after every other column when some instance has them; a folder written
@@ -126,9 +133,10 @@ def _runs_rows(records: Records) -> Iterable[list]:
     instance_fields = sorted({k for inst in records.instances for k in inst.spec})
     later = [c for c, (attr, _) in _LATER_FACTS.items()
              if any(getattr(i, attr) is not None for i in records.instances)]
-    yield [f"instance_{k}" for k in instance_fields] + list(_OLD_COLUMNS) + list(_NEW_COLUMNS) + later
+    measured = [c for c in _LATER_RUN_COLUMNS if any(getattr(r, c) is not None for r in records)]
+    yield [f"instance_{k}" for k in instance_fields] + list(_OLD_COLUMNS) + list(_NEW_COLUMNS) + later + measured
     for r in records:
-        values = {name: getattr(r, name) for name in (*_TEXT, *_NUMBERS, "idx")}
+        values = {name: getattr(r, name) for name in (*_TEXT, *_NUMBERS, *measured, "idx")}
         values.update(
             params=r.params_key, instance=r.instance.key,
             extras=json.dumps({k: v for k, v in r.extras.items() if _is_scalar(v)}, sort_keys=True),
@@ -136,7 +144,7 @@ def _runs_rows(records: Records) -> Iterable[list]:
         )
         values.update({column: getattr(r.instance, _LATER_FACTS[column][0]) for column in later})
         row = [r.instance.spec.get(k, "") for k in instance_fields]
-        yield row + [_cell(values[c]) for c in (*_OLD_COLUMNS, *_NEW_COLUMNS, *later)]
+        yield row + [_cell(values[c]) for c in (*_OLD_COLUMNS, *_NEW_COLUMNS, *later, *measured)]
 
 
 def _curve_rows(records: Records) -> Iterable[list]:
@@ -356,6 +364,11 @@ def _parse_run(cells: dict) -> dict:
             row[name] = parse(cells[name])
         except ValueError as exc:  # json.JSONDecodeError included
             raise ValueError(f"column {name}: {exc}") from None
+    for column in _LATER_RUN_COLUMNS:  # absent from folders written before they were measured: None
+        try:
+            row[column] = _number(cells.get(column, ""))
+        except ValueError as exc:
+            raise ValueError(f"column {column}: {exc}") from None
     row["facts"] = {attr: row.pop(column) for column, attr in _FACTS.items()}
     for column, (_, key) in _LATER_FACTS.items():
         try:

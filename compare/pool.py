@@ -178,7 +178,11 @@ class WorkerPool:
         self._idle, self._busy = [], []
 
     def drain(self, tasks, plugins, record, *, on_start=None, on_finish=None) -> None:
-        """Run ``tasks`` (lists of runs); ``record(run, designs, seconds, peak_mb)`` for each run as it ends.
+        """Run ``tasks`` (lists of runs); ``record(run, *result)`` for each run as it ends.
+
+        ``result`` is the run's :class:`compare.execution.RunResult` (designs, seconds,
+        peak_mb, scoring_seconds, baseline_mb); a run that ended its worker or its time
+        limit has only its designs and seconds, its memory and scoring seconds unknown.
 
         ``on_start(runs)`` and ``on_finish(runs)`` are told when a worker takes and
         ends a task (for progress). Raises :class:`compare.runner.WorkerSetupError`
@@ -264,9 +268,9 @@ class WorkerPool:
     @staticmethod
     def _fail(runs, message: str, seconds: float, queue: deque, record, extras: dict | None = None) -> None:
         """A task that ended its worker or its time: one run is recorded failed; several are retried one by one."""
-        from .execution import failed_run
+        from .execution import RunResult, failed_run
 
         if len(runs) > 1:
             queue.extendleft([run] for run in reversed(runs))
             return
-        record(runs[0], failed_run(runs[0], message, extras), seconds, None)
+        record(runs[0], *RunResult(failed_run(runs[0], message, extras), seconds))

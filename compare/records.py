@@ -49,7 +49,7 @@ def row_problem(row: Mapping) -> str | None:
         value = row.get(name)
         if value is not None and not (_is_number(value) and float(value).is_integer() and value >= 0):
             return f"{name} {value!r} is not a count (a whole number >= 0)"
-    for name in ("cost_stderr", "seconds", "run_seconds", "run_peak_mb"):
+    for name in ("cost_stderr", "seconds", "run_seconds", "run_peak_mb", "run_scoring_seconds", "run_baseline_mb"):
         value = row.get(name)  # NaN passes: a failed design's standard error is NaN
         if value is not None and not (_is_number(value) and not value < 0):
             return f"{name} {value!r} is not a number >= 0"
@@ -224,9 +224,12 @@ class DesignRecord:
     ``params`` and ``extras`` are read-only mappings (values nested in them, such as
     training curves, are not copied); ``params_key`` is the canonical JSON of
     ``params``. ``cost`` and ``cost_stderr`` are NaN where the store has none.
-    ``run_seconds``, ``run_designs`` and ``run_peak_mb`` describe the run that made the
-    design (wall seconds including scoring, its number of designs, and its process's
-    peak resident memory in MB); None where unknown.
+    ``run_seconds``, ``run_designs``, ``run_peak_mb``, ``run_scoring_seconds`` and
+    ``run_baseline_mb`` describe the run that made the design: its wall seconds (scoring
+    included), its number of designs, its process's peak resident memory in MB, the
+    seconds it spent scoring its designs, and the resident memory in MB its process
+    started the run from (see :class:`compare.execution.RunResult`). None where unknown:
+    the last two in stores and report folders written before they were recorded.
     """
 
     run_key: str
@@ -252,6 +255,8 @@ class DesignRecord:
     run_seconds: float | None = field(default=None, repr=False)
     run_designs: int | None = field(default=None, repr=False)
     run_peak_mb: float | None = field(default=None, repr=False)
+    run_scoring_seconds: float | None = field(default=None, repr=False)
+    run_baseline_mb: float | None = field(default=None, repr=False)
 
     @classmethod
     def from_dict(cls, row: Mapping, instance: InstanceRecord | None = None) -> DesignRecord:

@@ -27,6 +27,7 @@ from .environment import environment
 from .execution import (  # noqa: F401 - re-exported: the runner's public names
     _THREAD_VARS,
     ExecutorError,
+    RunResult,
     WorkerSetupError,
     _limit_threads,
     build_instance,
@@ -188,7 +189,7 @@ def _drain(pool: Executor, tasks: list[list[Run]], plugins, record) -> None:
                     raise
                 except Exception as exc:  # noqa: BLE001 - the executor's failure is these runs' status
                     message = f"the executor could not run it: {type(exc).__name__}: {exc}"
-                    results = [(failed_run(run, message), 0.0, None) for run in task]
+                    results = [RunResult(failed_run(run, message), 0.0) for run in task]
                 for run, result in zip(task, results):
                     record(run, *result)
                 reissue_warnings(caught, warned)  # after recording: a warning filtered to "error" loses no run
@@ -287,8 +288,10 @@ def run_experiment(
     bar = tqdm(total=len(pending), desc=f"{spec.name}", unit="run", disable=not progress or not pending)
     owner = uuid.uuid4().hex
 
-    def record(run, designs, seconds, peak_mb=None):
-        store.add_run(run, designs, experiment=spec.name, seconds=seconds, peak_mb=peak_mb, owner=owner)
+    def record(run, designs, seconds, peak_mb=None, scoring_seconds=None, baseline_mb=None):
+        # The fields of a compare.execution.RunResult, in its order.
+        store.add_run(run, designs, experiment=spec.name, seconds=seconds, peak_mb=peak_mb,
+                      scoring_seconds=scoring_seconds, baseline_mb=baseline_mb, owner=owner)
         summary.computed += 1
         summary.statuses.update(d.status for d in designs)
         bar.update(1)

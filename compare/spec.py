@@ -19,6 +19,9 @@ their hyperparameters and grids, and evaluation settings. It expands into
     [report]
     sections = ["table1", "training_curves"]       # optional report sections this experiment asks for
     pairs = [["GRNN-Sparse", "Sparse l1 ADMM"]]     # optional paired comparisons (labels or method names)
+    ladder = { budgets = [1, 2, 5], methods = ["sparse_admm", "sls"], near = 5.0, claim = "..." }
+                                 # optional: the answer opens with each method's best cost within these link
+                                 # budgets per system, and whether the first budget comes within near % of LQR
 
     [evaluation]
     validation_size = 2000       # the default: codesign.evaluation.VALIDATION_SIZE
@@ -203,6 +206,7 @@ class ExperimentSpec:
     plugins: tuple = ()
     sections: tuple = ()
     pairs: tuple = ()
+    ladder: dict | None = None
 
     def runs(self) -> list[Run]:
         """Every run of the experiment, instance-major, keyed with its method's code fingerprint."""
@@ -290,7 +294,9 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
         except PluginError as exc:
             raise SpecError(f"{where}: {exc}") from None
         loaded.append(plugin)
-    sections, pairs = _parse_report(_typed("report", data.get("report", {}), dict))
+    report = _typed("report", data.get("report", {}), dict)
+    sections, pairs = _parse_report(report)
+    ladder = parse_ladder(report.get("ladder"))
     name = _check_name(_typed("name", data.get("name", default_name), str), given="name" in data)
     description = _typed("description", data.get("description", ""), str)
     if "instances" not in data:
@@ -311,7 +317,10 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
     methods = tuple(_parse_method(i, entry, base, loaded, fields, timeout) for i, entry in enumerate(raw_methods))
     _check_where(methods, instances.expand(), name)
     _check_pairs(pairs, methods)
-    return ExperimentSpec(name, description, instances, methods, evaluation, text, tuple(loaded), sections, pairs)
+    if ladder is not None:
+        _check_pairs((tuple(ladder["methods"]),), methods, where="report.ladder.methods")
+    return ExperimentSpec(name, description, instances, methods, evaluation, text, tuple(loaded), sections, pairs,
+                          ladder)
 
 
 def _check_name(name: str, *, given: bool) -> str:
@@ -355,18 +364,53 @@ def _check_where(methods: tuple, instances: list[dict], experiment: str) -> None
         raise SpecError(f"methods[{i}].where: {given} matches no instance of experiment {experiment}; {takes}")
 
 
-def _check_pairs(pairs: tuple, methods: tuple) -> None:
-    """Every label a ``[report] pairs`` entry names is a method entry's label or method name."""
+def _check_pairs(pairs: tuple, methods: tuple, where: str | None = None) -> None:
+    """Every label a ``[report] pairs`` entry (or the list ``where`` names) names is a method entry's label or
+    method name."""
     known = list(dict.fromkeys([m.label for m in methods] + [m.method for m in methods]))
     for i, pair in enumerate(pairs):
         for x in pair:
             if x not in known:
-                raise SpecError(f"report.pairs[{i}]: {x!r} is no method entry's label or method name "
-                                f"(known: {', '.join(repr(k) for k in known)})")
+                raise SpecError(f"{where or f'report.pairs[{i}]'}: {x!r} is no method entry's label or method "
+                                f"name (known: {', '.join(repr(k) for k in known)})")
+
+
+#: ``[report] ladder``'s defaults: link budgets, and the excess over LQR (per cent) that counts as near it.
+LADDER_BUDGETS = (1, 2, 5)
+LADDER_NEAR = 5.0
+
+
+def parse_ladder(table) -> dict | None:
+    """``[report] ladder`` checked, with its defaults filled in (None where the spec has none).
+
+    ``budgets``: link budgets (ints >= 0, increasing; default 1, 2, 5); ``methods``: labels
+    or method names (default: every method entry's); ``near``: the excess over LQR, in per
+    cent, within which a design counts as close to it (default 5); ``claim``: the claim checked,
+    in words (optional). :mod:`compare.answer` reads it from the stored spec text.
+    """
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise SpecError(f"report.ladder: expected a table (budgets, methods, near, claim), got {table!r}")
+    _check_keys("report.ladder", table, {"budgets", "methods", "near", "claim"})
+    budgets = table.get("budgets", list(LADDER_BUDGETS))
+    if not (isinstance(budgets, list) and budgets and all(isinstance(b, int) and not isinstance(b, bool) and b >= 0
+                                                           for b in budgets)):
+        raise SpecError(f"report.ladder.budgets: expected a non-empty list of link counts >= 0, got {budgets!r}")
+    if sorted(set(budgets)) != budgets:
+        raise SpecError(f"report.ladder.budgets: must increase, got {budgets!r}")
+    methods = table.get("methods", [])
+    if not (isinstance(methods, list) and all(isinstance(x, str) and x for x in methods)):
+        raise SpecError(f"report.ladder.methods: expected a list of method labels or names, got {methods!r}")
+    near = table.get("near", LADDER_NEAR)
+    if isinstance(near, bool) or not isinstance(near, (int, float)) or not 0 < near < math.inf:
+        raise SpecError(f"report.ladder.near: expected a percentage > 0, got {near!r}")
+    claim = _typed("report.ladder.claim", table.get("claim", ""), str)
+    return {"budgets": list(budgets), "methods": list(methods), "near": float(near), "claim": claim}
 
 
 def _parse_report(table: dict) -> tuple[tuple, tuple]:
-    _check_keys("report", table, {"sections", "pairs"})
+    _check_keys("report", table, {"sections", "pairs", "ladder"})
     sections = table.get("sections", [])
     if not isinstance(sections, list):
         raise SpecError(f"report.sections: expected a list, got {sections!r}")
@@ -430,6 +474,11 @@ def _parse_instances(table, base, limit: tuple = (MAX_INSTANCES, False)) -> Inst
         except UnknownFamilyError as exc:
             raise SpecError(f"{where}.family: {exc}") from None
         names.append(name)
+        seeds = entry.get("seeds")
+        if isinstance(seeds, int) and not isinstance(seeds, bool):
+            # A seed count is checked before the family lists its instances: 1e8 seeds would
+            # exhaust memory listing them before the count below could refuse them.
+            _check_count(where, len(specs) + seeds, *limit, at_least=True)
         parsed = family.parse(entry, base)
         _check_count(where, len(specs) + len(parsed), *limit)
         _check_memory(where, family, parsed)
@@ -437,16 +486,20 @@ def _parse_instances(table, base, limit: tuple = (MAX_INSTANCES, False)) -> Inst
     return InstanceSpec(families=tuple(dict.fromkeys(names)), specs=tuple(specs))
 
 
-def _check_count(where: str, count: int, limit: int, given: bool) -> None:
-    """Refuse more instances than ``limit`` before any is built (planning builds each one, see :data:`MAX_INSTANCES`)."""
+def _check_count(where: str, count: int, limit: int, given: bool, *, at_least: bool = False) -> None:
+    """Refuse more instances than ``limit`` before any is built (planning builds each one, see :data:`MAX_INSTANCES`).
+
+    ``at_least``: ``count`` is a lower bound (a seed count, before the other keys multiply it).
+    """
     if count <= limit:
         return
+    said = f"at least {count}" if at_least else f"{count}"
     if given:
-        raise SpecError(f"{where}: {count} instances, more than max_instances = {limit}; raise max_instances "
+        raise SpecError(f"{where}: {said} instances, more than max_instances = {limit}; raise max_instances "
                         "(a top-level key) to plan them all")
-    raise SpecError(f"{where}: {count} instances, more than the {limit} an experiment plans by default (each is "
-                    f"built once while planning, about 3 ms and 1 KB of store each); set max_instances = {count} "
-                    "at the top of the spec to plan them all")
+    raise SpecError(f"{where}: {said} instances, more than the {limit} an experiment plans by default (each is "
+                    f"built once while planning, about 3 ms and 1 KB of store each); set max_instances = "
+                    f"{'at least ' * at_least}{count} at the top of the spec to plan them all")
 
 
 def _machine_memory() -> int | None:

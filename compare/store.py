@@ -45,7 +45,9 @@ CREATE TABLE IF NOT EXISTS runs (
     version TEXT NOT NULL,
     n_designs INTEGER NOT NULL,
     seconds REAL NOT NULL,
-    peak_mb REAL
+    peak_mb REAL,
+    scoring_seconds REAL,
+    baseline_mb REAL
 );
 CREATE TABLE IF NOT EXISTS designs (
     run_key TEXT NOT NULL REFERENCES runs(run_key),
@@ -88,7 +90,12 @@ STALE_SECONDS = 6 * 3600.0
 APPLICATION_ID = 0x47524E4E
 #: SQLite's ``user_version`` of the schema this code writes. 1: the columns of 2 but ``runs.peak_mb``;
 #: stores written before the mark existed are recognized by their tables and migrated as version 1.
-SCHEMA_VERSION = 2
+#: 2: the columns of 3 but ``runs.scoring_seconds`` and ``runs.baseline_mb``.
+SCHEMA_VERSION = 3
+
+#: Run columns added after the first schema, with their type: a store of an older version gains the
+#: ones it lacks when opened, NULL (unknown) in the runs it already holds.
+_LATER_RUN_COLUMNS = {"peak_mb": "REAL", "scoring_seconds": "REAL", "baseline_mb": "REAL"}
 
 _TABLES = {"meta", "runs", "designs", "claims", "members"}
 _RUN_COLUMNS = ("run_key", "experiment", "instance", "method", "label", "params", "version", "n_designs", "seconds")
@@ -280,10 +287,11 @@ class Store:
             for statement in _SCHEMA.split(";"):
                 if statement.strip():
                     self._conn.execute(statement)
-            if version == 1:
+            if version >= 1:
                 columns = {row[1] for row in self._conn.execute("PRAGMA table_info(runs)")}
-                if "peak_mb" not in columns:
-                    self._conn.execute("ALTER TABLE runs ADD COLUMN peak_mb REAL")
+                for name, kind in _LATER_RUN_COLUMNS.items():
+                    if name not in columns:
+                        self._conn.execute(f"ALTER TABLE runs ADD COLUMN {name} {kind}")
             self._conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")
             self._conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
@@ -367,12 +375,15 @@ class Store:
 
     @_guarded
     def add_run(self, run, designs, *, experiment: str, seconds: float, peak_mb: float | None = None,
+                scoring_seconds: float | None = None, baseline_mb: float | None = None,
                 owner: str | None = None) -> bool:
         """Store a finished run and its designs atomically; False if it was already stored.
 
-        ``seconds`` and ``peak_mb`` are the run's wall time and its process's peak resident
-        memory (None if unknown). The run's claim goes in the same transaction; ``owner``'s
-        other claims get a heartbeat.
+        ``seconds`` is the run's wall time, ``scoring_seconds`` the part of it spent scoring
+        its designs, ``peak_mb`` and ``baseline_mb`` its process's peak resident memory and
+        the resident memory it started from, in MB (each None if unknown; see
+        :class:`compare.execution.RunResult`). The run's claim goes in the same
+        transaction; ``owner``'s other claims get a heartbeat.
         """
         rows = []
         for idx, design in enumerate(designs):
@@ -390,11 +401,12 @@ class Store:
         with self._conn:
             cursor = self._conn.execute(
                 "INSERT OR IGNORE INTO runs (run_key, experiment, instance, method, label, params, version, "
-                "n_designs, seconds, peak_mb) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "n_designs, seconds, peak_mb, scoring_seconds, baseline_mb) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (
                     run.key, experiment, json.dumps(run.instance, sort_keys=True), run.method, run.label,
                     json.dumps(run.params, sort_keys=True), run.fingerprint, len(rows), float(seconds),
-                    None if peak_mb is None else float(peak_mb),
+                    *(None if value is None else float(value) for value in (peak_mb, scoring_seconds, baseline_mb)),
                 ),
             )
             if cursor.rowcount == 0:
@@ -501,7 +513,8 @@ class Store:
         query = """
             SELECT d.run_key, d.idx, r.experiment, r.instance, d.method, d.label, d.params, d.cost,
                    d.cost_stderr, d.cost_kind, d.links, d.self_loops, d.info_model, d.status, d.message,
-                   d.seconds, d.controller_kind, d.extras, r.version, r.seconds, r.n_designs, r.peak_mb
+                   d.seconds, d.controller_kind, d.extras, r.version, r.seconds, r.n_designs, r.peak_mb,
+                   r.scoring_seconds, r.baseline_mb
             FROM designs d JOIN runs r USING (run_key)
             WHERE NOT EXISTS (SELECT 1 FROM members) OR d.run_key IN (SELECT run_key FROM members)
             ORDER BY r.instance, d.label, d.run_key, d.idx
@@ -510,6 +523,7 @@ class Store:
             "run_key", "idx", "experiment", "instance", "method", "label", "params", "cost", "cost_stderr",
             "cost_kind", "links", "self_loops", "info_model", "status", "message", "seconds",
             "controller_kind", "extras", "fingerprint", "run_seconds", "run_designs", "run_peak_mb",
+            "run_scoring_seconds", "run_baseline_mb",
         ]
         rows = []
         for row in self._conn.execute(query):

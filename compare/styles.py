@@ -22,7 +22,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 __all__ = ["Style", "INFO_MODELS", "INFO_ORDER", "METHOD_STYLES", "style_key", "style_for", "label_styles",
-           "REFERENCE_COLOUR", "BOUND_COLOUR"]
+           "grnn_kinds", "kind_suffix", "REFERENCE_COLOUR", "BOUND_COLOUR"]
 
 #: Information model -> (matplotlib line style, plotly dash, description). The line style of
 #: every curve drawn for a method is its information model's.
@@ -142,16 +142,50 @@ _PLOTLY_SYMBOLS = {"o": "circle", "s": "square", "D": "diamond", "d": "diamond-t
                    "8": "octagon"}
 
 
+#: A GRNN's readout and initialization make other kinds of design too: (key suffix, label words, marker).
+#: The marker of a warm start is that of the method whose design it starts from (decentralized's hexagon,
+#: sparse_delayed's diamond); the colour stays the GRNN variant's.
+GRNN_KINDS = {
+    "per_node": ("_per_node", "per-node", "p"),
+    "warm_diagonal": ("_warm_diagonal", "warm: diagonal", "h"),
+    "warm_delayed": ("_warm_delayed", "warm: delayed", "D"),
+    "warm_auto": ("_init_auto", "init: auto", "H"),
+}
+
+
+def grnn_kinds(method: str, params: Mapping | None = None) -> list[str]:
+    """The :data:`GRNN_KINDS` of a GRNN design: its readout ("per_node") and warm start ("warm_<init>").
+
+    Empty for the paper's GRNN (shared readout, random initialization) and for other methods.
+    """
+    params = params or {}
+    if not method.startswith("grnn"):
+        return []
+    kinds = ["per_node"] if params.get("readout", "shared") == "per_node" else []
+    init = params.get("init", "random")
+    if init != "random":
+        kinds.append(f"warm_{init}")
+    return kinds
+
+
+def kind_suffix(method: str, params: Mapping | None = None) -> str:
+    """What tells a GRNN design's kind apart in a label: " (per-node)", " (per-node, warm: delayed)", or ""."""
+    words = [GRNN_KINDS[k][1] if k in GRNN_KINDS else k.replace("_", " ") for k in grnn_kinds(method, params)]
+    return f" ({', '.join(words)})" if words else ""
+
+
 def style_key(method: str, params: Mapping | None = None) -> str:
     """The key of :data:`METHOD_STYLES` for a design of ``method`` with hyperparameters ``params``.
 
-    The activation of a GRNN (identity: a linear controller), the graph of an SLS
+    The activation of a GRNN (identity: a linear controller), its readout and warm start
+    (:func:`grnn_kinds`: ``grnn_sparse_per_node_warm_diagonal``), the graph of an SLS
     design and the information model of an exact-budget search make different kinds of
     design; other hyperparameters (γ, β, steps) do not.
     """
     params = params or {}
-    if method.startswith("grnn") and params.get("activation") == "identity":
-        return f"{method}_linear"
+    if method.startswith("grnn"):
+        key = f"{method}_linear" if params.get("activation") == "identity" else method
+        return key + "".join(GRNN_KINDS[k][0] if k in GRNN_KINDS else f"_{k}" for k in grnn_kinds(method, params))
     if method in ("sls", "sls_topologies"):
         return f"sls_{params.get('graph', 'plant')}"
     if method in ("sparse_budget", "best_pattern") and params.get("info_model") == "delayed":
@@ -170,6 +204,12 @@ def style_for(method: str, params: Mapping | None = None, info_model: str | None
     if key in METHOD_STYLES:
         colour, marker, info = METHOD_STYLES[key]
         return Style(colour, marker, info_model or info)
+    kinds = grnn_kinds(method, params)
+    base = key[:key.index(GRNN_KINDS[kinds[0]][0])] if kinds and kinds[0] in GRNN_KINDS else None
+    if base in METHOD_STYLES:  # a GRNN's readout or warm start: the variant's colour, the kind's marker
+        colour, _, info = METHOD_STYLES[base]
+        return Style(colour, GRNN_KINDS[kinds[-1]][2] if kinds[-1] in GRNN_KINDS else _spare(key)[1],
+                     info_model or info)
     colour, marker = _spare(key)
     return Style(colour, marker, info_model or "instantaneous")
 

@@ -188,7 +188,7 @@ def test_the_runner_records_a_method_returning_no_design_as_failed(monkeypatch):
     monkeypatch.setitem(methods._REGISTRY, "empty_method_run", Method.from_function(_empty, name="empty_method_run"))
     spec = {"family": "paper", "seed": 0, "n": 6, "degree": 4, "a_norm": 0.995, "b_norm": 1.0, "hops": 3,
             "horizon": 8}
-    designs, _, _ = execute_run(Run(spec, "empty_method_run", "Empty", {}, EvaluationSpec(), "f"))
+    designs = execute_run(Run(spec, "empty_method_run", "Empty", {}, EvaluationSpec(), "f")).designs
     assert [d.status for d in designs] == ["failed"]
     assert "method 'empty_method_run' returned no design" in designs[0].message
 

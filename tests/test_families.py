@@ -118,7 +118,7 @@ def test_a_file_that_is_not_npz_is_named(tmp_path):
     ('family = "matrices"\nfiles = ["nothing*.npz"]', "instances.files[0]: no file matches"),
     ('family = "matrices"', "instances.files: required"),
     ('family = "matrices"\nfiles = ["x.npz"]\nseeds = 3', "instances.seeds: unknown key (allowed: family, files)"),
-    ('family = "mass_sprung"', "instances.family: unknown family 'mass_sprung' (known: chain, mass_spring, matrices, paper, platoon, random_network, swing_grid"),
+    ('family = "mass_sprung"', "instances.family: unknown family 'mass_sprung' (known: chain, mass_spring, matrices, paper, platoon, power_grid, random_network, swing_grid"),
     ('family = "paper"\nfiles = ["x.npz"]', "instances.files: unknown key"),
     ('family = "paper"\nconnect = "glue"', "instances.connect: must be one of redraw, bridge, got 'glue'"),
 ])

@@ -141,8 +141,9 @@ def test_old_columns_come_first_in_their_order(stored, tmp_path):
     new = ["instance", "instance_nodes", "plant_links", "comm_links", "experiment", "controller_kind",
            "run_seconds", "run_designs", "run_peak_mb"]
     later = ["nodes", "inputs", "actuated_nodes", "open_loop_radius"]  # the systems table's facts, when stored
+    measured = ["run_scoring_seconds", "run_baseline_mb"]  # the runs' later measurements, when recorded
     fields_ = sorted(records[0].instance.spec)
-    assert header == [f"instance_{k}" for k in fields_] + old + new + later
+    assert header == [f"instance_{k}" for k in fields_] + old + new + later + measured
     # The extras column keeps the scalar extras only, as before.
     grnn = next(r for r in records if r.method == "grnn_sparse")
     row = next(line for line in (tmp_path / "runs.csv").read_text().splitlines() if grnn.run_key in line)

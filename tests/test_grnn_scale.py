@@ -20,6 +20,7 @@ from codesign.instances import hop_distances, paper_instance
 from codesign.methods import get_method
 
 grnn_module = importlib.import_module("codesign.learned.grnn")
+grnn_controller = importlib.import_module("codesign.learned.grnn_controller")
 GRNNController, LinearGRNNController = grnn_module.GRNNController, grnn_module.LinearGRNNController
 
 
@@ -37,7 +38,7 @@ def _parameters(inst, seed=0):
 def _structured(monkeypatch):
     """Every size takes the structured path, and every matrix is multiplied as CSR."""
     monkeypatch.setattr(evaluation, "STRUCTURED_ABOVE", 0)
-    monkeypatch.setattr(grnn_module, "STRUCTURED_ABOVE", 0)
+    monkeypatch.setattr(grnn_controller, "STRUCTURED_ABOVE", 0)
     monkeypatch.setattr(evaluation, "SPARSE_DENSITY", 1.0)
 
 

@@ -1,6 +1,7 @@
 import networkx as nx
 import numpy as np
 import pytest
+import scipy.sparse.csgraph
 
 from codesign import Instance, InstanceError, hop_distances, paper_instance
 
@@ -178,6 +179,31 @@ def test_redrawing_gives_up_with_an_error_that_names_the_bridge(monkeypatch):
                                             r"\(seed 4\); pass connect='bridge'"):
         paper_instance(4, n=1000)
     assert paper_instance(4, n=1000, connect="bridge").n == 1000
+
+
+@pytest.mark.parametrize("kind", ["uniform", "ties", "rounded"])
+def test_the_sorted_line_gives_the_dense_sort_nearest_neighbours_ties_included(kind):
+    """Every draw's neighbour sets are the dense stable argsort's, also where positions repeat or distances tie."""
+    from codesign.instances import _is_connected, _knn_graph, _knn_neighbours
+
+    rng = np.random.default_rng(["uniform", "ties", "rounded"].index(kind))
+    for _ in range(300):
+        n = int(rng.integers(2, 60))
+        degree = int(rng.integers(2, n + 1))
+        positions = {"uniform": lambda: rng.uniform(0.0, 1.0, n), "ties": lambda: rng.integers(0, 6, n) / 7.0,
+                     "rounded": lambda: np.round(rng.uniform(0.0, 1.0, n), 2)}[kind]()
+        dense = np.argsort(np.abs(positions[:, None] - positions[None, :]), axis=1, kind="stable")[:, :degree]
+        window = _knn_neighbours(positions, degree)
+        assert np.array_equal(np.sort(window, axis=1), np.sort(dense, axis=1))
+        graph = _knn_graph(positions, degree)
+        components = scipy.sparse.csgraph.connected_components(graph, directed=False, return_labels=False)
+        assert _is_connected(window) == (components == 1)
+
+
+def test_a_hopeless_redraw_ends_with_the_default_limit():
+    """1500 nodes: no draw of 1000 is connected; each draw used to sort the dense distance matrix (197 s in all)."""
+    with pytest.raises(InstanceError, match=r"on 1500 nodes in 1000 draws \(seed 0\); pass connect='bridge'"):
+        paper_instance(0, n=1500)
 
 
 def test_large_instances_use_the_doubling_dare_and_it_agrees_with_scipy(monkeypatch):

@@ -319,16 +319,36 @@ def test_a_million_seeds_is_refused_up_front_naming_the_limit_and_the_key_that_r
     spec = tmp_path / "big.toml"
     spec.write_text('name = "big"\n[instances]\nn = [6]\nseeds = 1000000\n[[methods]]\nmethod = "lqr"\n')
     line = error_line(_invoke("run", spec, "--out", tmp_path / "out", "--no-progress"))
-    assert ("instances: 1000000 instances, more than the 50000 an experiment plans by default" in line
-            and "set max_instances = 1000000 at the top of the spec" in line), line
+    assert ("instances: at least 1000000 instances, more than the 50000 an experiment plans by default" in line
+            and "set max_instances = at least 1000000 at the top of the spec" in line), line
     assert not (tmp_path / "out").exists()
 
 
+def test_a_seed_count_is_refused_before_the_family_lists_its_instances(monkeypatch):
+    """1e9 seeds: listing them first would take tens of GB; the count alone is refused at once."""
+    import dataclasses
+
+    import compare.families as families
+
+    paper = families.get_family("paper")
+    listed = []
+    monkeypatch.setitem(families._FAMILIES, "paper", dataclasses.replace(
+        paper, parse=lambda *a, **k: listed.append(1) or paper.parse(*a, **k)))
+    text = 'name = "huge"\nmax_instances = 10\n[instances]\nn = [6, 8]\nseeds = 1000000000\n[[methods]]\nmethod = "lqr"\n'
+    with pytest.raises(SpecError, match=r"instances: at least 1000000000 instances, more than max_instances = 10"):
+        parse_spec(text)
+    assert not listed
+    # Seeds within the limit: the family lists them and the exact count, seeds times sizes, is refused.
+    with pytest.raises(SpecError, match=r"instances: 12 instances, more than max_instances = 10"):
+        parse_spec(text.replace("1000000000", "6"))
+    assert listed
+
+
 def test_max_instances_raises_or_lowers_the_limit():
-    text = 'name = "few"\n{limit}[instances]\nn = [6]\nseeds = 3\n[[methods]]\nmethod = "lqr"\n'
-    assert len(parse_spec(text.format(limit="max_instances = 3\n")).instances.specs) == 3
-    with pytest.raises(SpecError, match=r"instances: 3 instances, more than max_instances = 2; raise max_instances"):
-        parse_spec(text.format(limit="max_instances = 2\n"))
+    text = 'name = "few"\n{limit}[instances]\nn = [6, 8]\nseeds = 2\n[[methods]]\nmethod = "lqr"\n'
+    assert len(parse_spec(text.format(limit="max_instances = 4\n")).instances.specs) == 4
+    with pytest.raises(SpecError, match=r"instances: 4 instances, more than max_instances = 3; raise max_instances"):
+        parse_spec(text.format(limit="max_instances = 3\n"))
     with pytest.raises(SpecError, match=r"max_instances: must be >= 1, got 0"):
         parse_spec(text.format(limit="max_instances = 0\n"))
 

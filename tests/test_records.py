@@ -35,7 +35,8 @@ def _store(path, *, facts: bool) -> Store:
     for i, inst in enumerate(INST[:2]):
         design = Design("m", {"gamma": 0.1}, None, 1.0 + i, 3, 8, "instantaneous", extras={"curve": [1, 2]})
         store.add_run(_Run(f"k{i}", inst, {"gamma": 0.1}), [design], experiment="x", seconds=1.0 + i,
-                      peak_mb=300.0 if i else None)
+                      peak_mb=300.0 if i else None, scoring_seconds=0.25 if i else None,
+                      baseline_mb=200.0 if i else None)
         if facts:
             store.set_instance_facts(inst, {"n": 8, "plant_links": 11 + i, "comm_links": 20})
     return store
@@ -50,9 +51,12 @@ def test_store_records_are_typed_with_canonical_keys_and_stored_facts(tmp_path):
     assert [f.name for f in dataclasses.fields(DesignRecord)] == [
         "run_key", "idx", "experiment", "instance", "method", "label", "params", "params_key", "cost", "cost_stderr",
         "cost_kind", "links", "self_loops", "info_model", "status", "message", "seconds", "controller_kind",
-        "extras", "fingerprint", "run_seconds", "run_designs", "run_peak_mb"]
+        "extras", "fingerprint", "run_seconds", "run_designs", "run_peak_mb", "run_scoring_seconds",
+        "run_baseline_mb"]
     assert (first.run_seconds, first.run_designs, first.run_peak_mb) == (1.0, 1, None)
     assert (records[1].run_seconds, records[1].run_peak_mb) == (2.0, 300.0)
+    assert (first.run_scoring_seconds, first.run_baseline_mb) == (None, None)
+    assert (records[1].run_scoring_seconds, records[1].run_baseline_mb) == (0.25, 200.0)
     assert first.instance.key == json.dumps(INST[0], sort_keys=True) == canonical_key(first.instance.spec)
     assert first.params == {"gamma": 0.1} and first.params_key == '{"gamma": 0.1}'
     assert first.extras == {"curve": [1, 2]} and first.fingerprint == "fp" and first.ok

@@ -436,3 +436,18 @@ def test_an_l1_path_keeps_the_previous_gain_when_a_gamma_fails(path, monkeypatch
                             method, params, "diverged", "gain does not stabilize", info_model="instantaneous"))
     (only,) = method(inst, gammas=[1e-4])
     assert only.status == "diverged" and np.isnan(only.cost)
+
+
+@pytest.mark.parametrize("name", ["sparse_admm", "sparse_newton"])
+def test_a_paths_design_seconds_add_up_to_no_more_than_its_wall_time(name):
+    """The γ → ∞ end point used to carry the diagonal gain's seconds a γ's timer had already counted."""
+    import time
+
+    import baselines
+
+    instance = paper_instance(1, n=6, a_norm=1.05)
+    start = time.perf_counter()
+    designs = getattr(baselines, name)(instance, gammas=[1e-2, 1.0])
+    wall = time.perf_counter() - start
+    assert designs[-1].params["gamma"] == float("inf")
+    assert sum(d.seconds for d in designs) <= wall

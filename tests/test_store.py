@@ -41,8 +41,13 @@ def test_run_store_and_resume(tmp_path):
         assert "spec:s" in store.meta()
         # every run records its wall time and its process's peak resident memory (Linux)
         assert all(r.run_seconds > 0 and r.run_designs == 1 for r in records)
+        # the scoring is timed inside the run, apart from the method: the two fit in its wall time
+        assert all(0 <= r.run_scoring_seconds and r.seconds + r.run_scoring_seconds <= r.run_seconds + 1e-3
+                   for r in records)
         if sys.platform.startswith("linux"):
             assert all(50 < r.run_peak_mb < 1e5 for r in records)
+            # and the memory the run started from, which the peak never falls below
+            assert all(50 < r.run_baseline_mb <= r.run_peak_mb for r in records)
 
 
 _FREED_THEN_MEASURED = """
@@ -79,6 +84,32 @@ def test_a_store_from_before_peak_memory_gains_the_column_and_keeps_its_runs(tmp
         records = store.records()
         assert len(records) == 9 and all(r.run_peak_mb is None for r in records)
         assert run_experiment(spec, store, progress=False).computed == 0
+
+
+def test_a_store_from_before_scoring_seconds_and_baselines_gains_them_unknown(tmp_path):
+    from compare.compute_report import NOT_MEASURED, compute_cells, compute_markdown
+    from compare.store import SCHEMA_VERSION
+
+    path = tmp_path / "old.sqlite"
+    spec = parse_spec(SPEC)
+    with Store(path) as store:
+        run_experiment(spec, store, progress=False)
+    con = sqlite3.connect(path)
+    with con:  # the runs table of schema 2
+        con.execute("ALTER TABLE runs DROP COLUMN scoring_seconds")
+        con.execute("ALTER TABLE runs DROP COLUMN baseline_mb")
+        con.execute("PRAGMA user_version = 2")
+    con.close()
+    with Store(path) as store:
+        records = store.records()
+        assert len(records) == 9 and all(r.run_scoring_seconds is None and r.run_baseline_mb is None for r in records)
+        assert all(r.run_seconds > 0 for r in records)  # what the store did hold is kept
+        assert NOT_MEASURED in compute_markdown(compute_cells(records))
+        assert run_experiment(spec, store, progress=False).computed == 0
+    con = sqlite3.connect(path)
+    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
+    assert {"scoring_seconds", "baseline_mb"} <= {row[1] for row in con.execute("PRAGMA table_info(runs)")}
+    con.close()
 
 
 def test_a_new_label_renames_stored_runs_without_recomputing(tmp_path):

@@ -3,6 +3,8 @@
 Public names::
 
     from codesign.learned import grnn, grnn_batch, GRNNController, GRNNSettings
+    from codesign.learned import embed_delayed_gain      # a delayed static gain as a per-node-readout GRNN
+    grnn(instance, readout="per_node", init="diagonal")  # a warm start (codesign.learned.warm)
     from codesign.learned import gcnn, gcnn_batch, GCNNController, GCNNSettings
     from codesign.learned import TrainingSettings, takes_settings      # your own learned method
     from codesign.learned import AutogradModel, StackModel, Member, Loop, TrainingJob
@@ -15,6 +17,7 @@ takes), a controller, and a method that trains its members with
 (docs/extending.md shows one).
 """
 
+from .embedding import delayed_gain_parts, embed_delayed_gain
 from .gcnn import GCNNController, GCNNSettings, gcnn, gcnn_batch
 from .grnn import GRNNController, GRNNSettings, LinearGRNNController, grnn, grnn_batch, grnn_defaults, paper_beta
 from .settings import TrainingSettings, takes_settings
@@ -26,4 +29,4 @@ __all__ = ["grnn", "grnn_batch", "grnn_defaults", "paper_beta", "GRNNController"
            "GRNNSettings", "gcnn", "gcnn_batch", "GCNNController", "GCNNSettings", "TrainingSettings",
            "takes_settings", "StackModel", "AutogradModel", "Member", "Loop", "TrainingJob", "TrainResult",
            "train_stack", "train_jobs", "best_member", "selection_costs", "selection_set", "curve", "simulated_design",
-           "diverged_members_message", "DTYPES"]
+           "diverged_members_message", "DTYPES", "embed_delayed_gain", "delayed_gain_parts"]

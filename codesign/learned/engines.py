@@ -30,12 +30,14 @@ def s_supports(S0: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 
 def resolve_engine(engine: str, states_per_node: int = 1, inputs_per_node: int = 1,
-                   nodes: int = 0, support_density: float = 0.0) -> str:
+                   nodes: int = 0, support_density: float = 0.0, *, readout: str = "shared") -> str:
     """The engine that runs: ``engine`` itself, or for "auto" the faster one that applies.
 
-    "auto" takes "fused" with one state and one input per node, unless the stack has
-    more than ``FUSED_DENSE_NODES`` nodes and an S support (``support_density``, its
-    largest fraction of nonzeros) more than ``FUSED_DENSE_S`` full.
+    "auto" takes "fused" with one state and one input per node and the shared
+    readout, unless the stack has more than ``FUSED_DENSE_NODES`` nodes and an S
+    support (``support_density``, its largest fraction of nonzeros) more than
+    ``FUSED_DENSE_S`` full. A per-node readout (``readout="per_node"``) trains on
+    "torch" only: the fused kernels read one G for every node.
     """
     if engine not in ENGINES:
         raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
@@ -43,7 +45,10 @@ def resolve_engine(engine: str, states_per_node: int = 1, inputs_per_node: int =
     if engine == "fused" and not scalar:
         raise ValueError(f"engine 'fused' needs one state and one input per node, this stack has "
                          f"{states_per_node} and {inputs_per_node}; use engine 'torch' or 'auto'")
+    if engine == "fused" and readout != "shared":
+        raise ValueError(f"engine 'fused' supports readout 'shared' only, got readout {readout!r}; "
+                         f"use engine 'torch' or 'auto'")
     if engine == "auto":
         dense_and_large = nodes > FUSED_DENSE_NODES and support_density > FUSED_DENSE_S
-        return "fused" if scalar and not dense_and_large else "torch"
+        return "fused" if scalar and readout == "shared" and not dense_and_large else "torch"
     return engine

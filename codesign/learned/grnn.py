@@ -5,7 +5,10 @@
 with S supported on the communication graph: node i reads its neighbours'
 hidden states once per step, so information travels one hop per time step.
 With ``activation="identity"`` the same parameterization is a linear dynamic
-controller (:class:`LinearGRNNController`) whose cost has a closed form.
+controller (:class:`LinearGRNNController`) whose cost has a closed form. With
+``readout="per_node"`` node i reads out u_i(t) = Z_i(t+1) G_i with a G_i of its own
+(the paper's G is shared, so every node has the same local gain F G); that class
+holds every delayed static gain exactly (:mod:`codesign.learned.embedding`).
 
 Entry points: :func:`grnn` (one instance, one variant) and :func:`grnn_batch`
 (many (instance, settings) jobs trained together in stacks of models by the one
@@ -23,17 +26,18 @@ from typing import Annotated, Literal
 import numpy as np
 
 from .._lazy import lazy_import
-from ..controllers import register_controller
 from ..design import Design, count_links
-from ..evaluation import STRUCTURED_ABOVE, exact_cost, impulse_responses, spectral_radius, structured_operator
-from ..instances import hop_distances, node_ranks, node_width
+from ..evaluation import STRUCTURED_ABOVE, exact_cost, spectral_radius
+from ..instances import hop_distances
 from ..methods import Above, AtLeast, method
 from ..status import DIVERGED, OPTIMAL
 from .engines import ENGINES, resolve_engine
-from .grnn_bptt import ACTIVATIONS, GRNNStack, ModelSpec, init_fwg
+from .grnn_bptt import ACTIVATIONS, READOUTS, GRNNStack, ModelSpec, init_fwg
 from .settings import SEED, TrainingSettings, takes_settings
 from .trainer import (Loop, TrainingJob, best_member, curve, diverged_members_message, finish_designs,
-                      selection_costs, selection_set, simulated_design, tanh_, train_jobs)
+                      selection_costs, selection_set, simulated_design, train_jobs)
+from .grnn_controller import GRNNController, LinearGRNNController, slot_index
+from .warm import INITS, Start, StartCache, build_start, check_warm_settings, member_start
 
 torch = lazy_import("torch")
 
@@ -41,235 +45,12 @@ torch = lazy_import("torch")
 FINGERPRINT_MODULES = ("codesign.learned.grnn_rollout",)
 
 __all__ = ["GRNNController", "LinearGRNNController", "GRNNSettings", "grnn", "grnn_batch", "VARIANTS",
-           "ACTIVATIONS", "grnn_defaults", "paper_beta", "PAPER_BETA"]
+           "ACTIVATIONS", "READOUTS", "INITS", "grnn_defaults", "paper_beta", "PAPER_BETA"]
 
 VARIANTS = ("given", "dense", "fixed", "sparse")
 
 #: Salts that keep the random streams of one (instance, seed) apart.
 _DATA, _INIT, _DENSE_S, _REFINE = 11, 12, 13, 14
-
-
-def _slot_index(owners, nodes: int) -> tuple[np.ndarray, int]:
-    """Where each state (or input) sits in the padded node signal, slot-major, and the slot count.
-
-    Slot c of node i is entry c N + i: with one entry per node the layout is the plain one.
-    """
-    owners = np.asarray(owners, dtype=int)
-    return node_ranks(owners) * nodes + owners, node_width(owners)
-
-
-@register_controller("grnn")
-@dataclass(frozen=True, eq=False)
-class GRNNController:
-    """A trained GRNN as the common simulator sees it (numpy, batched).
-
-    Attributes
-    ----------
-    S : ndarray (N, N)
-        Graph shift operator; its off-diagonal support is the set of links.
-    F : ndarray (h,), or (p, h) when nodes hold several states
-        Input weights: node i's (padded) states x_i in R^p enter its hidden state as x_i' F.
-    W : ndarray (h, h)
-    G : ndarray (h,), or (h, q) when nodes hold several inputs
-        Readout: node i's (padded) inputs are Z_i G.
-    state_nodes, input_nodes : ndarray of int, optional
-        The node of each state and input (None: one of each per node, in order).
-        State k is slot "its rank among its node's states" of its node's signal.
-    """
-
-    S: np.ndarray
-    F: np.ndarray
-    W: np.ndarray
-    G: np.ndarray
-    state_nodes: np.ndarray | None = None
-    input_nodes: np.ndarray | None = None
-
-    def __post_init__(self):
-        for name in ("S", "F", "W", "G"):
-            value = np.array(getattr(self, name), dtype=float)
-            value.setflags(write=False)
-            object.__setattr__(self, name, value)
-        if self.S.ndim != 2 or self.S.shape[0] != self.S.shape[1]:
-            raise ValueError(f"S must be square, got shape {self.S.shape}")
-        if self.W.ndim != 2 or self.W.shape[0] != self.W.shape[1]:
-            raise ValueError(f"W must be square (h, h), got shape {self.W.shape}")
-        h, nodes = self.W.shape[0], self.S.shape[0]
-        blocks = self.state_nodes is not None or self.input_nodes is not None
-        if not blocks:
-            if self.F.size != h or self.G.size != h:
-                raise ValueError(f"F, W, G must have shapes (h,), (h, h), (h,); got {self.F.shape}, "
-                                 f"{self.W.shape}, {self.G.shape}")
-            object.__setattr__(self, "F", self.F.ravel())
-            object.__setattr__(self, "G", self.G.ravel())
-            # Above STRUCTURED_ABOVE nodes a sparse S is multiplied on its support, the hidden
-            # state kept node-major (N, h, batch) so that S acts on rows: a step then costs
-            # O(N degree h batch) instead of O(N^2 h batch) (11x at N = 1000, 7 links per node).
-            # At and below, the dense products run unchanged (the shipped reports' costs).
-            sparse = structured_operator(self.S) if nodes > STRUCTURED_ABOVE else None
-            object.__setattr__(self, "_S_op", sparse)
-            return
-        object.__setattr__(self, "_S_op", None)
-        layout = {}
-        for name, default in (("state_nodes", nodes), ("input_nodes", nodes)):
-            value = getattr(self, name)
-            owners = np.arange(default) if value is None else np.array(value, dtype=int)
-            owners.setflags(write=False)
-            object.__setattr__(self, name, owners)
-            layout[name] = _slot_index(owners, nodes)
-        (p_index, p), (q_index, q) = layout["state_nodes"], layout["input_nodes"]
-        if self.F.shape in ((p, h), (h,) * (p == 1)) and self.G.shape in ((h, q), (h,) * (q == 1)):
-            object.__setattr__(self, "F", self.F.reshape(p, h))
-            object.__setattr__(self, "G", self.G.reshape(h, q))
-        else:
-            raise ValueError(f"with {p} states and {q} inputs per node, F and G must have shapes ({p}, {h}) and "
-                             f"({h}, {q}); got {self.F.shape} and {self.G.shape}")
-        object.__setattr__(self, "_state_index", p_index)
-        object.__setattr__(self, "_input_index", q_index)
-
-    @property
-    def hidden(self) -> int:
-        return self.W.shape[0]
-
-    @property
-    def blocks(self) -> bool:
-        """Whether nodes hold several states or inputs (F and G are matrices)."""
-        return self.state_nodes is not None
-
-    def reset(self, batch: int):
-        # Hidden state kept feature-major, (h, batch, N): W acts on the first axis and S on the
-        # last, each as one wide matrix product. The node-major (N, batch, h) layout needs a
-        # tall-thin (N batch, h) x (h, h) product that runs several times slower.
-        if self._S_op is not None:
-            return np.zeros((self.S.shape[0], self.hidden, batch))
-        return np.zeros((self.hidden, batch, self.S.shape[0]))
-
-    def _pre_activation(self, state, x):
-        if self._S_op is not None:  # node-major (N, h, batch): S by its CSR on rows, W per node
-            n, h, batch = state.shape
-            pre = (self._S_op @ np.matmul(self.W.T, state).reshape(n, h * batch)).reshape(n, h, batch)
-            xt = np.ascontiguousarray(x.T)  # no copy in a rollout, whose states are node-major
-            for k in range(h):
-                pre[:, k, :] += self.F[k] * xt
-            return pre
-        h, batch, n = state.shape
-        pre = ((self.W.T @ state.reshape(h, batch * n)).reshape(h * batch, n) @ self.S.T).reshape(h, batch, n)
-        if not self.blocks:
-            pre += self.F[:, None, None] * x[None]
-            return pre
-        padded = np.zeros((batch, self.F.shape[0] * n))
-        padded[:, self._state_index] = x
-        pre += np.einsum("ck,bcn->kbn", self.F, padded.reshape(batch, -1, n))
-        return pre
-
-    def _output(self, Z):
-        if self._S_op is not None:
-            return np.ascontiguousarray(np.matmul(self.G, Z).T)
-        h, batch, n = Z.shape
-        if not self.blocks:
-            return (self.G @ Z.reshape(h, batch * n)).reshape(batch, n)
-        return np.einsum("kc,kbn->bcn", self.G, Z).reshape(batch, -1)[:, self._input_index]
-
-    #: The activation of the compiled rollout (tanh; the identity in LinearGRNNController).
-    _squash = True
-
-    def rollout(self, instance, x0, steps: int):
-        """Each draw's cost and each step's peak state from one compiled pass (:mod:`.grnn_rollout`).
-
-        None where that pass does not apply: node blocks, S taken sparse above
-        STRUCTURED_ABOVE nodes, or a plant without one input per node.
-        """
-        if self.blocks or self._S_op is not None or instance.m != instance.n or instance.n != self.S.shape[0]:
-            return None
-        from .grnn_rollout import rollout_costs  # numba loads on first use
-
-        return rollout_costs(instance, self.S, self.F, self.W, self.G, x0, steps, squash=self._squash)
-
-    def step(self, state, x):
-        Z = self._pre_activation(state, x)
-        # tanh as 2 sigmoid(2 z) - 1 through torch (shared memory, in place): numpy's float64
-        # tanh takes most of a rollout; this is several times faster and within 4e-16 of it.
-        tanh_(torch.from_numpy(Z))
-        return self._output(Z), Z
-
-    def arrays(self) -> dict:
-        arrays = {"S": self.S, "F": self.F, "W": self.W, "G": self.G}
-        if self.blocks:
-            arrays.update(state_nodes=self.state_nodes, input_nodes=self.input_nodes)
-        return arrays
-
-    @classmethod
-    def from_arrays(cls, arrays: dict) -> "GRNNController":
-        return cls(arrays["S"], arrays["F"], arrays["W"], arrays["G"],
-                   arrays.get("state_nodes"), arrays.get("input_nodes"))
-
-    @property
-    def support(self) -> np.ndarray:
-        return self.S != 0
-
-    @property
-    def states(self) -> int:
-        return self.S.shape[0] if not self.blocks else self.state_nodes.size
-
-    def linearized_closed_loop(self, instance, *, sparse: bool = False):
-        """Closed loop in (x, vec Z) linearized at the origin (tanh'(0) = 1).
-
-        With z = vec(Z) row-major (node i's features at i h, ..., i h + h - 1):
-        z' = (S kron W') z + Kzx x, u = Gm z', x' = A x + B u, where Kzx puts
-        F' x_i into node i's features and Gm reads Z_i G (I kron F', I kron G'
-        with one state and one input per node). ``sparse``: as a scipy CSR
-        matrix, built from sparse factors (one state and one input per node), for
-        :func:`~codesign.evaluation.spectral_radius` at a thousand nodes, where
-        the dense matrix is (n + n h)^2 (288 MB at n = 1000, h = 5).
-        """
-        n, h = self.S.shape[0], self.hidden
-        if sparse and not self.blocks:
-            import scipy.sparse as sp
-
-            Kzz = sp.kron(sp.csr_array(self.S), self.W.T, format="csr")
-            Kzx = sp.kron(sp.eye_array(n), self.F.reshape(h, 1), format="csr")
-            Gm = sp.kron(sp.eye_array(n), self.G.reshape(1, h), format="csr")
-            B = sp.csr_array(instance.B)
-            top = sp.hstack([sp.csr_array(instance.A) + B @ (Gm @ Kzx), B @ (Gm @ Kzz)])
-            return sp.vstack([top, sp.hstack([Kzx, Kzz])], format="csr")
-        Kzz = np.kron(self.S, self.W.T)
-        if not self.blocks:
-            Kzx = np.kron(np.eye(n), self.F.reshape(h, 1))
-            Gm = np.kron(np.eye(n), self.G.reshape(1, h))
-        else:
-            s_nodes, s_slots = self.state_nodes, node_ranks(self.state_nodes)
-            u_nodes, u_slots = self.input_nodes, node_ranks(self.input_nodes)
-            Kzx = np.zeros((n * h, s_nodes.size))
-            Gm = np.zeros((u_nodes.size, n * h))
-            for k in range(h):
-                Kzx[s_nodes * h + k, np.arange(s_nodes.size)] = self.F[s_slots, k]
-                Gm[np.arange(u_nodes.size), u_nodes * h + k] = self.G[k, u_slots]
-        top = np.hstack([instance.A + instance.B @ Gm @ Kzx, instance.B @ Gm @ Kzz])
-        bottom = np.hstack([Kzx, Kzz])
-        return np.vstack([top, bottom])
-
-
-@register_controller("grnn_linear")
-@dataclass(frozen=True, eq=False)
-class LinearGRNNController(GRNNController):
-    """A GRNN with the identity activation: Z(t+1) = S Z(t) W + x(t) F, u(t) = Z(t+1) G.
-
-    A linear dynamic controller that relays information one hop per step, so its
-    cost has a closed form (:meth:`closed_loop_responses`, scored by
-    :func:`codesign.exact_cost`) and :meth:`linearized_closed_loop` is its exact
-    closed loop.
-    """
-
-    _squash = False
-
-    def step(self, state, x):
-        Z = self._pre_activation(state, x)
-        return self._output(Z), Z
-
-    def closed_loop_responses(self, instance, steps: int | None = None):
-        """Maps ``(phi_x, phi_u)`` of this controller in closed loop with the instance (by :meth:`step`)."""
-        if instance.n != self.states:
-            raise ValueError(f"controller has n = {self.states}, instance has n = {instance.n}")
-        return impulse_responses(instance, self, steps)
 
 
 @dataclass(frozen=True)
@@ -287,7 +68,9 @@ class GRNNSettings(TrainingSettings):
     clip : float
         Gradient-norm clip per model (0 disables it).
     frob : float
-        Weight of the plain Frobenius norms of S, F, G in the loss (W is not penalized).
+        Weight of the plain Frobenius norms of S, F, G in the loss (W is not penalized;
+        with a per-node readout, of ||G||_F / sqrt(N), the root mean square of the
+        nodes' readouts, so that N equal readouts cost what the shared one does).
     refine_ensemble : int
         Refinement runs of the ``sparse`` variant (the paper code used one).
     threshold : float
@@ -309,6 +92,35 @@ class GRNNSettings(TrainingSettings):
         "fused" where it applies and is faster (not on node blocks, nor for an S
         over half full at more than 32 nodes). The engines agree to rounding at
         every step; over a 750-step run that can grow to 1e-4 or so in the final cost.
+        A per-node readout trains on "torch" ("auto" takes it; "fused" is an error).
+    readout : {"shared", "per_node"}
+        u_i(t) = z_i(t+1) G: one readout G shared by every node (the paper's, so every
+        node has the same instantaneous local gain F G), or ``"per_node"``: node i
+        reads out with its own G_i (G of shape (N, h), or (N, h, q)), which with
+        h >= 2 and the identity activation contains every delayed static gain on one
+        state and one input per node (:func:`codesign.learned.embed_delayed_gain`).
+        Each G_i starts at the shared initialization. A per-node design is tied to
+        its graph's size: it does not transfer to a graph with another number of nodes.
+    init : {"random", "diagonal", "delayed", "auto"}
+        The first parameters: the paper's random draw, or a warm start, a static design
+        on the same instance embedded exactly (:mod:`codesign.learned.warm`): the best
+        diagonal gain (:func:`baselines.decentralized`), or a delayed gain
+        (``sparse``: the delayed l1 path's design at γ = β / trace(P); ``dense``: the
+        path's dense end; ``given``: the delayed gain polished on the given graph's
+        links; not ``fixed``); ``auto``: the diagonal gain where the open-loop spectral
+        radius exceeds :data:`~codesign.learned.warm.AUTO_RADIUS` (1.22, measured), else
+        the random draw. Needs ``readout="per_node"`` and ``hidden`` >= 2 states per
+        node. Every member starts at the design's closed loop, with learning rates
+        divided by its state scale. The design is the start itself where training ended
+        above it (selection-set cost; exact cost with the identity activation), diverged,
+        or diverged when scored: ``extras["kept_start"]``, ``init_cost``,
+        ``trained_cost`` and the message say so.
+    init_scale : float
+        How far into tanh the warm start's hidden states reach: the embedding's ε (F scaled
+        by ε, G by 1/ε) is init_scale / the largest standard deviation of a state along the
+        design's closed loop. A smaller value keeps tanh closer to linear (the start's cost
+        gap to the design, ``extras["init_tanh_gap"]``, shrinks like its square) and the
+        start stable from larger states; a larger one suits Adam's steps.
     """
 
     hidden: Annotated[int, AtLeast(1)] = 5
@@ -321,6 +133,9 @@ class GRNNSettings(TrainingSettings):
     l1_hops: Annotated[int, AtLeast(1)] | None = None
     activation: Literal[ACTIVATIONS] = "tanh"
     engine: Literal[ENGINES] = "auto"
+    readout: Literal[READOUTS] = "shared"
+    init: Literal[INITS] = "random"
+    init_scale: Annotated[float, Above(0)] = 0.1
 
     def loop(self, horizon: int) -> Loop:
         return Loop(steps=self.steps, batch=self.batch, horizon=horizon, clip=self.clip,
@@ -340,6 +155,7 @@ class _Job:
     seed: int
     settings: GRNNSettings
     params: dict
+    start: Start | None = None  # with init != "random": the warm start (set by grnn_batch)
 
 
 def _parse(instance, kwargs: dict) -> _Job:
@@ -358,8 +174,10 @@ def _parse(instance, kwargs: dict) -> _Job:
         raise ValueError(f"beta applies to variant 'sparse' only, got beta={beta!r} with variant {variant!r}")
     SEED.check(seed, "seed")
     settings = GRNNSettings.parse(kwargs, "GRNN")
-    resolve_engine(settings.engine, _slot_index(instance.state_nodes, instance.nodes)[1],
-                   _slot_index(instance.input_nodes, instance.nodes)[1])  # fails now, not after training
+    check_warm_settings(settings, variant, instance)
+    resolve_engine(settings.engine, slot_index(instance.state_nodes, instance.nodes)[1],
+                   slot_index(instance.input_nodes, instance.nodes)[1],
+                   readout=settings.readout)  # fails now, not after training
     params = {"variant": variant, "seed": int(seed), **dict(sorted(settings.changed().items()))}
     if beta is not None:
         params["beta"] = float(beta)
@@ -391,8 +209,8 @@ def _padded_problem(inst) -> dict:
         return dict(A=inst.A, B=inst.B, Q=inst.Q, R=inst.R, P=inst.P, state_index=None, p=1, q=1,
                     embed=lambda x: x)
     N = inst.nodes
-    s_index, p = _slot_index(inst.state_nodes, N)
-    u_index, q = _slot_index(inst.input_nodes, N)
+    s_index, p = slot_index(inst.state_nodes, N)
+    u_index, q = slot_index(inst.input_nodes, N)
     Ex = np.zeros((p * N, inst.n))
     Ex[s_index, np.arange(inst.n)] = 1.0
     Eu = np.zeros((q * N, inst.m))
@@ -401,10 +219,24 @@ def _padded_problem(inst) -> dict:
                 P=Ex @ inst.P @ Ex.T, state_index=s_index, p=p, q=q, embed=lambda x: x @ Ex.T)
 
 
-def _spec(job: _Job, member: int, *, S0, mask, lr, beta, penalty, init_salt) -> ModelSpec:
+def _spec(job: _Job, member: int, *, S0, mask, lr, beta, penalty, init_salt, fwg=None) -> ModelSpec:
+    """One member's spec; ``fwg``: its first (F, W, G) where not drawn (a warm start's refinement)."""
     inst, s = job.instance, job.settings
     padded = _padded_problem(inst)
     F, W, G = init_fwg(np.random.default_rng([job.seed, member, init_salt]), s.hidden, padded["p"], padded["q"])
+    if s.readout == "per_node":
+        # Every node starts at the shared draw, and ||G||_F / sqrt(N) is penalized: the start is the
+        # shared model's, loss included, and the same draws as a shared run (no extra stream).
+        G = np.repeat(G[None], inst.nodes, axis=0)
+        penalty = (*penalty[:3], penalty[3] / np.sqrt(inst.nodes))
+    if job.start is not None and job.start.warm:
+        # The embedded design, the member's draw only on the features it leaves unread, and learning rates
+        # divided by the start's state scale, as its F is (codesign/learned/warm.py).
+        lr = lr * job.start.lr_factor
+        if fwg is None:
+            S0, F, W, G = member_start(job.start, F, W, np.where(mask, S0, 0.0) if mask.any() else S0, padded["p"])
+    if fwg is not None:
+        F, W, G = (np.array(a, dtype=float) for a in fwg)
     return ModelSpec(
         A=padded["A"], B=padded["B"], Q=padded["Q"], R=padded["R"], P=padded["P"], trace_P=inst.trace_P,
         S0=np.asarray(S0, dtype=float), mask=np.asarray(mask, dtype=bool), F0=F, W0=W, G0=G,
@@ -453,18 +285,35 @@ def _first_stage_specs(job: _Job) -> list[ModelSpec]:
     return specs
 
 
-def _refine_specs(job: _Job, S_l1: np.ndarray) -> list[ModelSpec]:
+def _refine_specs(job: _Job, l1: dict) -> list[ModelSpec]:
+    """The refinement on the l1 stage's support: F, W, G redrawn (the paper's), or kept from a warm start's l1 stage."""
     s = job.settings
+    S_l1 = l1["S"]
     mask = np.abs(S_l1) >= s.threshold
+    fwg = (l1["F"], l1["W"], l1["G"]) if job.start is not None and job.start.warm else None
     return [_spec(job, member, S0=np.where(mask, S_l1, 0.0), mask=mask, lr=s.lr, beta=0.0,
-                  penalty=(s.frob, s.frob, 0.0, s.frob), init_salt=_REFINE)
+                  penalty=(s.frob, s.frob, 0.0, s.frob), init_salt=_REFINE, fwg=fwg)
             for member in range(s.refine_ensemble)]
 
 
 def _training(job: _Job, specs: list[ModelSpec]) -> TrainingJob:
     s = job.settings
-    return TrainingJob(GRNNStack, [spec.member() for spec in specs], s.loop(job.instance.horizon),
-                       options=(("activation", s.activation), ("engine", s.engine)))
+    options = (("activation", s.activation), ("engine", s.engine))
+    if s.readout != "shared":  # the shared runs' options (their stacks' keys) stay as they were
+        options += (("readout", s.readout),)
+    return TrainingJob(GRNNStack, [spec.member() for spec in specs], s.loop(job.instance.horizon), options=options)
+
+
+def _warm_starts(parsed: list[_Job]) -> None:
+    """Each warm-started job's :class:`Start`; a source design is computed once per instance (and γ) in the batch."""
+    import time
+
+    cache = StartCache()
+    for job in parsed:
+        if job.settings.init != "random":
+            t0 = time.perf_counter()
+            job.start = build_start(cache, job.instance, job.settings, job.variant, job.beta)
+            job.start.extras["init_seconds"] = time.perf_counter() - t0  # 0 where the source was computed already
 
 
 def grnn_batch(jobs, *, stack_size: int = 128) -> list[Design]:
@@ -482,12 +331,18 @@ def grnn_batch(jobs, *, stack_size: int = 128) -> list[Design]:
     parsed = [_parse(instance, kwargs) for instance, kwargs in jobs]
     if not parsed:
         return []
-    first, seconds = train_jobs([_training(job, _first_stage_specs(job)) for job in parsed], stack_size=stack_size)
+    _warm_starts(parsed)
+    specs = [_first_stage_specs(job) for job in parsed]
+    first, seconds = train_jobs([_training(job, job_specs) for job, job_specs in zip(parsed, specs)],
+                                stack_size=stack_size)
+    for j, job in enumerate(parsed):
+        if job.start is not None:
+            seconds[j] += job.start.extras.get("init_seconds", 0.0)
     chosen = [best_member(results) for results in first]
 
     refine = [j for j, job in enumerate(parsed) if job.variant == "sparse" and chosen[j] is not None]
     refined, refine_seconds = train_jobs(
-        [_training(parsed[j], _refine_specs(parsed[j], first[j][chosen[j]].params["S"])) for j in refine],
+        [_training(parsed[j], _refine_specs(parsed[j], first[j][chosen[j]].params)) for j in refine],
         stack_size=stack_size)
     refined_by_job = dict(zip(refine, refined))
     for j, extra in zip(refine, refine_seconds):
@@ -498,6 +353,8 @@ def grnn_batch(jobs, *, stack_size: int = 128) -> list[Design]:
 
 
 def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
+    if job.start is not None:
+        return _finish_warm(job, first, chosen, refined, seconds)
     method = "grnn" if job.variant == "given" else f"grnn_{job.variant}"
     extras: dict = {
         "variant": job.variant,
@@ -532,6 +389,115 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
                             links=links, self_loops=self_loops, seconds=seconds, extras=extras,
                             stability_steps=job.settings.stability_steps,
                             stability_size=job.settings.stability_size, message=diverged_members_message(first))
+
+
+def _controller(job: _Job, params: dict, *, linear: bool | None = None):
+    """The controller of trained (or start) parameters S, F, W, G; ``linear`` defaults to the activation's."""
+    nodes = {} if job.instance.scalar_nodes else dict(state_nodes=job.instance.state_nodes,
+                                                       input_nodes=job.instance.input_nodes)
+    linear = job.settings.activation == "identity" if linear is None else linear
+    kind = LinearGRNNController if linear else GRNNController
+    return kind(**{k: params[k] for k in ("S", "F", "W", "G")}, **nodes)
+
+
+def _compared_cost(job: _Job, controller) -> float:
+    """The cost a warm start and its trained model are compared by: exact (identity activation), or the
+    mean normalized cost on the selection set (the draws that pick ensemble members), inf if unbounded."""
+    if job.settings.activation == "identity":
+        cost = exact_cost(job.instance, controller)
+        return float(cost) if np.isfinite(cost) else float("inf")
+    from ..evaluation import simulate
+
+    rollout = simulate(job.instance, controller, selection_set(job.instance, job.settings.curve_size))
+    return float(rollout.plain_cost) if rollout.bounded and np.isfinite(rollout.plain_cost) else float("inf")
+
+
+def _finish_warm(job: _Job, first, chosen, refined, seconds) -> Design:
+    """A run with ``init`` set: trained as any run, then the start kept where training made it worse.
+
+    The trained model and the start (the embedded design, the closed loop every member
+    starts from) are compared by :func:`_compared_cost`; the start is kept where the
+    trained model costs more, where training diverged, and where the trained model
+    diverges when scored (on draws beyond the selection set). A start that fell back to
+    the random draw has nothing to keep: the run is an ordinary one, its fallback noted.
+    """
+    start = job.start
+    method = "grnn" if job.variant == "given" else f"grnn_{job.variant}"
+    extras: dict = {
+        "variant": job.variant,
+        "ensemble_curve_costs": selection_costs(first),
+        "diverged_members": sum(r.diverged for r in first),
+    }
+    extras.update(start.extras)
+    result, failure = None, None
+    if chosen is None:
+        failure = f"all {len(first)} ensemble members diverged (non-finite loss or gradient)"
+    else:
+        result = first[chosen]
+        if job.variant == "sparse":
+            extras["l1_curve"] = curve(result)
+            extras["l1_links"], extras["l1_self_loops"] = count_links(
+                np.abs(result.params["S"]) >= job.settings.threshold)
+            best = best_member(refined) if refined else None
+            extras["refine_curve_costs"] = selection_costs(refined)
+            result, failure = (None, "every refinement run diverged") if best is None else (refined[best], None)
+    notes = [extras["init_note"]] if "init_note" in extras else []
+    members = [diverged_members_message(first)] if diverged_members_message(first) else []
+    trained = _controller(job, result.params) if result is not None else None
+    if not start.warm:  # fell back to the random draw: an ordinary run
+        if trained is None:
+            return Design.failure(method, job.params, DIVERGED, "; ".join([failure] + notes), info_model="delayed",
+                                  seconds=seconds, extras=extras)
+        extras["curve"] = curve(result)
+        return _scored(job, method, trained, seconds, extras, "; ".join(notes + members))
+
+    # The embedded design itself: every member starts at its closed loop (what they add is unread).
+    start_params = dict(S=start.S, F=start.F, W=start.W, G=start.G)
+    start_controller = _controller(job, start_params)
+    start_cost = _compared_cost(job, start_controller)
+    extras["init_cost"] = start_cost
+    extras["init_tanh_gap"] = 0.0
+    if job.settings.activation == "tanh":  # the start against its linear twin (the embedded design) on the same draws
+        twin = _compared_cost(job, _controller(job, start_params, linear=True))
+        extras["init_tanh_gap"] = float((start_cost - twin) / twin) if np.isfinite(twin) and twin else float("nan")
+    trained_cost = _compared_cost(job, trained) if trained is not None else float("nan")
+    kept = trained is None or not trained_cost <= start_cost
+    extras["trained_cost"] = trained_cost
+    extras["kept_start"] = bool(kept)
+    extras["curve"] = curve(result) if result is not None else {"step": [], "cost": []}
+    measure = "exact cost" if job.settings.activation == "identity" else "selection-set cost"
+    if not kept:
+        head = f"warm start from {start.label}: {measure} {start_cost:.6g} -> {trained_cost:.6g}"
+        design = _scored(job, method, trained, seconds, dict(extras), "; ".join([head] + notes + members))
+        if design.status != DIVERGED:
+            return design
+        # The trained model diverged where it was scored (draws beyond the selection set's): the start instead.
+        failure = f"the trained model diverged when scored ({design.message})"
+        extras["kept_start"] = True
+    why = failure or f"training ended at {trained_cost:.6g}, above the start"
+    head = f"warm start from {start.label} kept ({measure} {start_cost:.6g}): {why}"
+    return _scored(job, method, start_controller, seconds, extras, "; ".join([head] + notes + members))
+
+
+def _scored(job: _Job, method: str, controller, seconds, extras, message: str) -> Design:
+    """A GRNN design scored as :func:`_finish` scores it (exact when linear, else simulated), with ``message``."""
+    links, self_loops = count_links(controller.S)
+    extras["spectral_radius"] = spectral_radius(
+        controller.linearized_closed_loop(job.instance, sparse=job.instance.n > STRUCTURED_ABOVE))
+    if job.settings.activation != "identity":
+        return simulated_design(job.instance, controller, method=method, params=job.params, info_model="delayed",
+                                links=links, self_loops=self_loops, seconds=seconds, extras=extras,
+                                stability_steps=job.settings.stability_steps,
+                                stability_size=job.settings.stability_size, message=message)
+    cost = exact_cost(job.instance, controller)
+    extras["bounded"] = bool(extras["spectral_radius"] < 1.0)
+    if not np.isfinite(cost):
+        return Design.failure(method, job.params, DIVERGED, "; ".join(
+            ["the linear GRNN's exact cost is not finite"] + ([message] if message else [])), info_model="delayed",
+            seconds=seconds, links=links, self_loops=self_loops, extras=extras)
+    return Design(method=method, params=job.params, controller=controller, cost=cost, links=links,
+                  self_loops=self_loops, info_model="delayed", status=OPTIMAL, message=message, seconds=seconds,
+                  cost_stderr=0.0, cost_kind="exact", extras=extras)
 
 
 def _finish_linear(job: _Job, controller, first, links, self_loops, seconds, extras) -> Design:

@@ -35,15 +35,23 @@ torch = lazy_import("torch")
 FINGERPRINT_MODULES = ("codesign.learned.fused",)
 
 __all__ = ["ModelSpec", "GRNNStack", "train_grnn", "rollout_cost", "grnn_loss_and_grad",
-           "init_fwg", "ACTIVATIONS", "ENGINES"]
+           "init_fwg", "ACTIVATIONS", "READOUTS", "ENGINES"]
 
 #: The GRNN's activation σ: the paper's tanh, or the identity (a linear dynamic controller).
 ACTIVATIONS = ("tanh", "identity")
+
+#: The GRNN's readout u_i = Z_i G: one G shared by every node (the paper's), or one G_i per node.
+READOUTS = ("shared", "per_node")
 
 
 def _check_activation(activation: str) -> None:
     if activation not in ACTIVATIONS:
         raise ValueError(f"activation must be one of {ACTIVATIONS}, got {activation!r}")
+
+
+def _check_readout(readout: str) -> None:
+    if readout not in READOUTS:
+        raise ValueError(f"readout must be one of {READOUTS}, got {readout!r}")
 
 
 def init_fwg(rng: np.random.Generator, hidden: int, states: int = 1, inputs: int = 1
@@ -80,7 +88,8 @@ class ModelSpec:
         Entries of S that train; all False freezes S.
     F0, W0, G0 : ndarray
         Initial F (h,) or (p, h), W (h, h), G (h,) or (h, q): p states and q
-        inputs per node (one of each: the vectors).
+        inputs per node (one of each: the vectors). With a per-node readout
+        G0 has a leading node axis: (N, h), or (N, h, q).
     data_seed : int or sequence of int
         Seed of this model's training draws x(0) ~ N(0, I).
     curve_x0 : ndarray (batch_v, N)
@@ -182,21 +191,26 @@ def _slots(v: torch.Tensor, k: int) -> torch.Tensor:
     return v.view(M, Bsz, k, kN // k).transpose(1, 2)
 
 
-def _forward(prob, S, F, W, G, x0, horizon: int, ws: _Workspace, activation: str = "tanh") -> torch.Tensor:
+def _forward(prob, S, F, W, G, x0, horizon: int, ws: _Workspace, activation: str = "tanh",
+             per_node: bool = False) -> torch.Tensor:
     """Roll the stack out from x0 (M, B, p N) into the workspace; J (M,) summed over the batch.
 
     Node signals are row vectors here (nodes on the last axis), so ``S Z`` is
     ``Z S'`` and ``Z W`` acts on the feature axis: both are single batched
     matmuls with wide operands, which BLAS runs far faster than the tall-thin
     (N B, h) x (h, h) products of the node-major layout. F is (M, p, h) and G
-    (M, h, q) (views of (M, h) when nodes hold one state and one input).
+    (M, h, q) (views of (M, h) when nodes hold one state and one input); with
+    ``per_node`` G is (M, N, h, q) in any view, node i reading its features with G[:, i].
     """
     M, N, Bsz, h = ws.shape
     p, q = ws.p, ws.q
     BN, hB = Bsz * N, h * Bsz
     F3 = F.view(M, p, h)
     Fb = [F3[:, c].reshape(M, h, 1, 1) for c in range(p)]
-    Gq = G.view(M, 1, h) if q == 1 else G.view(M, h, q).transpose(1, 2).contiguous()  # (M, q, h)
+    if per_node:
+        Gn = G.view(M, N, h, q)
+    else:
+        Gq = G.view(M, 1, h) if q == 1 else G.view(M, h, q).transpose(1, 2).contiguous()  # (M, q, h)
     Wt = W.transpose(1, 2)
     St = S.transpose(1, 2)
     X, U, J = ws.X, ws.U, ws.J
@@ -222,7 +236,9 @@ def _forward(prob, S, F, W, G, x0, horizon: int, ws: _Workspace, activation: str
         if squash:
             tanh_(Z)
         u = U[t]
-        if q == 1:
+        if per_node:  # u_i = Z_i G_i: node i's features by its own readout
+            _slots(u, q).copy_(torch.einsum("mkbn,mnkc->mcbn", Z, Gn))
+        elif q == 1:
             torch.bmm(Gq, Z.view(M, h, BN), out=u.view(M, 1, BN))
         else:
             torch.bmm(Gq, Z.view(M, h, BN), out=ws.Uq.view(M, q, BN))
@@ -257,14 +273,16 @@ def _node_sizes(prob, nodes: int) -> tuple[int, int, int]:
     return nodes, prob.A.shape[1] // nodes, prob.B.shape[2] // nodes
 
 
-def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None, activation="tanh"):
+def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None, activation="tanh",
+                       readout="shared"):
     """Per-model loss and its gradient with respect to (S, F, W, G), by hand-written BPTT.
 
     Parameters
     ----------
     prob : _Problem
     S, F, W, G : Tensor
-        Shapes (M, N, N), (M, h) or (M, p, h), (M, h, h), (M, h) or (M, h, q).
+        Shapes (M, N, N), (M, h) or (M, p, h), (M, h, h), (M, h) or (M, h, q);
+        G is (M, N, h) or (M, N, h, q) with ``readout="per_node"``.
     x0 : Tensor (M, B, p N)
         Initial conditions, one row per trajectory (padded slot-major layout).
     penalty : Tensor (M, 4)
@@ -274,6 +292,7 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None,
     ws : _Workspace, optional
         Reusable buffers (made here if not given).
     activation : {"tanh", "identity"}
+    readout : {"shared", "per_node"}
 
     Returns
     -------
@@ -289,36 +308,51 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None,
         ws = _Workspace(M, N, Bsz, h, horizon, S.dtype, keep=True, p=p, q=q)
     BN, hB = Bsz * N, h * Bsz
     _check_activation(activation)
+    _check_readout(readout)
+    per_node = readout == "per_node"
     squash = activation == "tanh"
-    J = _forward(prob, S, F, W, G, x0, horizon, ws, activation)
+    J = _forward(prob, S, F, W, G, x0, horizon, ws, activation, per_node)
     X, U, Zs, Ys = ws.X, ws.U, ws.Zs, ws.Ys
     QX = X if prob.Q_identity else ws.QX
     RU = U if prob.R_identity else ws.RU
     c2 = 2.0 / Bsz
-    Gc = G.view(M, h, q)
     Fr = F.view(M, p, h)
     dS = torch.zeros_like(S)
     # dF, dG accumulate as row vectors: (1, BN) x (BN, h) runs ~6x faster than (h, BN) x (BN, 1).
     dF = torch.zeros(M, p, h, dtype=S.dtype)
     dWt = torch.zeros_like(W)
-    dG = torch.zeros(M, q, h, dtype=S.dtype)
+    if per_node:
+        Gn = G.view(M, N, h, q)
+        dG = torch.zeros(M, N, h, q, dtype=S.dtype)
+    else:
+        Gc = G.view(M, h, q)
+        dG = torch.zeros(M, q, h, dtype=S.dtype)
     lam, lam_next = ws.lam
     torch.mul(ws.PxT, c2, out=lam)
     du, dZ, dZn, tmp, dPre, dY = ws.du, ws.dZ, ws.dZn, ws.tmp, ws.dPre, ws.dY
     dPre_h = dPre.view(M, h, BN)
     for t in range(horizon - 1, -1, -1):
         torch.baddbmm(RU[t], lam, prob.B, beta=c2, out=du)  # d/du of x' = x A' + u B'
-        if q == 1:
-            duq = du.view(M, 1, BN)
-        else:
-            ws.Uq.copy_(_slots(du, q))
-            duq = ws.Uq.view(M, q, BN)
         Zn = Zs[t]  # Z(t+1)
-        if t == horizon - 1:
-            torch.bmm(Gc, duq, out=dZn.view(M, h, BN))
+        if per_node:  # dZ(t+1)_i = G_i du_i (+ what Z(t+2) sent back); dG_i = sum_b Z_i(t+1)' du_i
+            du_nodes = _slots(du, q)  # (M, q, B, N)
+            from_u = torch.einsum("mnkc,mcbn->mkbn", Gn, du_nodes)
+            if t == horizon - 1:
+                dZn.copy_(from_u)
+            else:
+                torch.add(dZ, from_u, out=dZn)
+            dG.add_(torch.einsum("mcbn,mkbn->mnkc", du_nodes, Zn))
         else:
-            torch.baddbmm(dZ.view(M, h, BN), Gc, duq, out=dZn.view(M, h, BN))
-        dG.baddbmm_(duq, Zn.view(M, h, BN).transpose(1, 2))
+            if q == 1:
+                duq = du.view(M, 1, BN)
+            else:
+                ws.Uq.copy_(_slots(du, q))
+                duq = ws.Uq.view(M, q, BN)
+            if t == horizon - 1:
+                torch.bmm(Gc, duq, out=dZn.view(M, h, BN))
+            else:
+                torch.baddbmm(dZ.view(M, h, BN), Gc, duq, out=dZn.view(M, h, BN))
+            dG.baddbmm_(duq, Zn.view(M, h, BN).transpose(1, 2))
         if squash:
             torch.mul(dZn, Zn, out=tmp)
             torch.addcmul(dZn, tmp, Zn, value=-1.0, out=dPre)  # dZn * (1 - Zn^2)
@@ -343,7 +377,10 @@ def grnn_loss_and_grad(prob, S, F, W, G, x0, *, penalty, beta, horizon, ws=None,
             _slots(lam_next, p).add_(ws.lp)
         lam, lam_next = lam_next, lam
     dF = dF.view(F.shape)
-    dG = dG.view(G.shape) if q == 1 else dG.transpose(1, 2).reshape(G.shape)
+    if per_node:
+        dG = dG.view(G.shape)
+    else:
+        dG = dG.view(G.shape) if q == 1 else dG.transpose(1, 2).reshape(G.shape)
     dW = dWt.transpose(1, 2)
     return _penalized(J / Bsz, [dS, dF, dW, dG], (S, F, W, G), penalty, beta)
 
@@ -364,13 +401,14 @@ def _penalized(cost, grads, params, penalty, beta):
 
 
 @no_grad
-def rollout_cost(prob, S, F, W, G, x0, horizon, ws=None, activation="tanh") -> torch.Tensor:
+def rollout_cost(prob, S, F, W, G, x0, horizon, ws=None, activation="tanh", readout="shared") -> torch.Tensor:
     """Mean normalized cost per model on the initial conditions x0 (M, B, p N)."""
+    _check_readout(readout)
     M, Bsz = x0.shape[:2]
     if ws is None:
         N, p, q = _node_sizes(prob, S.shape[1])
         ws = _Workspace(M, N, Bsz, W.shape[1], horizon, S.dtype, keep=False, p=p, q=q)
-    J = _forward(prob, S, F, W, G, x0, horizon, ws, activation)
+    J = _forward(prob, S, F, W, G, x0, horizon, ws, activation, readout == "per_node")
     return J / Bsz / prob.trace_P
 
 
@@ -379,23 +417,31 @@ def rollout_cost(prob, S, F, W, G, x0, horizon, ws=None, activation="tanh") -> t
 class GRNNStack(StackModel):
     """A stack of GRNNs for :func:`~codesign.learned.trainer.train_stack`; members' problems are :class:`ModelSpec`.
 
-    Options: ``activation`` (one of :data:`ACTIVATIONS`) and ``engine`` (one of
-    :data:`ENGINES`; the engines agree to rounding). S trains on its mask (an
-    all-False mask freezes it at S0; the others start on their support).
+    Options: ``activation`` (one of :data:`ACTIVATIONS`), ``engine`` (one of
+    :data:`ENGINES`; the engines agree to rounding) and ``readout`` (one of
+    :data:`READOUTS`; "per_node" trains on the torch engine only, its members'
+    G0 with a leading node axis). S trains on its mask (an all-False mask
+    freezes it at S0; the others start on their support).
     """
 
     names = ("S", "F", "W", "G")
 
-    def __init__(self, members, loop: Loop, *, activation: str = "tanh", engine: str = "torch"):
+    def __init__(self, members, loop: Loop, *, activation: str = "tanh", engine: str = "torch",
+                 readout: str = "shared"):
         _check_activation(activation)
+        _check_readout(readout)
         specs = [m.problem for m in members]
         tdt = torch_dtype(loop.dtype)
         M, N = len(specs), specs[0].S0.shape[0]
         prob = _Problem(specs, tdt)
         _, p, q = _node_sizes(prob, N)
         masks = np.stack([np.asarray(s.mask, dtype=bool) for s in specs])
-        engine = self.engine_for(members, engine)
+        engine = self.engine_for(members, engine, readout=readout)
         self.dim = p * N
+        h = np.shape(specs[0].W0)[0]
+        if readout == "per_node" and np.shape(specs[0].G0) not in [(N, h, q)] + [(N, h)] * (q == 1):
+            raise ValueError(f"readout 'per_node' needs G0 of shape ({N}, {h}, {q})"
+                             f"{f' or ({N}, {h})' if q == 1 else ''}, got {np.shape(specs[0].G0)}")
 
         def stack(name):
             return torch.tensor(np.stack([np.asarray(getattr(s, name), dtype=float) for s in specs]), dtype=tdt)
@@ -432,10 +478,10 @@ class GRNNStack(StackModel):
 
             def loss_and_grad(x0):
                 return grnn_loss_and_grad(prob, S, F, W, G, x0, penalty=penalty, beta=beta, horizon=horizon,
-                                          ws=ws_train, activation=activation)
+                                          ws=ws_train, activation=activation, readout=readout)
 
             def curve_cost(x0):
-                return rollout_cost(prob, S, F, W, G, x0, horizon, ws_curve, activation)
+                return rollout_cost(prob, S, F, W, G, x0, horizon, ws_curve, activation, readout)
 
         self._loss_and_grad, self._curve_cost, self._maskf = loss_and_grad, curve_cost, maskf
         self.engine = engine
@@ -446,19 +492,20 @@ class GRNNStack(StackModel):
         return member.shape_key() + tuple(np.shape(getattr(s, k)) for k in ("A", "B", "S0", "F0", "W0", "G0"))
 
     @staticmethod
-    def engine_for(members, engine: str) -> str:
+    def engine_for(members, engine: str, *, readout: str = "shared") -> str:
         """The engine a stack of ``members`` trains with (:func:`~codesign.learned.engines.resolve_engine`)."""
         specs = [m.problem for m in members]
         N = specs[0].S0.shape[0]
         masks = np.stack([np.asarray(s.mask, dtype=bool) for s in specs])
         supports = s_supports(np.stack([s.S0 for s in specs]), masks)
         return resolve_engine(engine, specs[0].A.shape[1] // N, specs[0].B.shape[1] // N, nodes=N,
-                              support_density=supports.mean(axis=(1, 2)).max())
+                              support_density=supports.mean(axis=(1, 2)).max(), readout=readout)
 
     @classmethod
-    def independent(cls, members, loop: Loop, *, activation: str = "tanh", engine: str = "torch") -> bool:
+    def independent(cls, members, loop: Loop, *, activation: str = "tanh", engine: str = "torch",
+                    readout: str = "shared") -> bool:
         """On the fused engine: it runs each model on its own, and Adam and the clip act per model."""
-        return cls.engine_for(members, engine) == "fused"
+        return cls.engine_for(members, engine, readout=readout) == "fused"
 
     def loss_and_grad(self, x0):
         loss, grads = self._loss_and_grad(x0)
@@ -471,11 +518,12 @@ class GRNNStack(StackModel):
 
 def train_grnn(specs: list[ModelSpec], *, steps: int = 750, batch: int = 20, horizon: int = 50,
                clip: float = 10.0, curve_every: int = 10, dtype: str = "float64", activation: str = "tanh",
-               engine: str = "auto"):
+               engine: str = "auto", readout: str = "shared"):
     """Train the GRNNs of ``specs`` as one stack (cosine schedule); one TrainResult per spec.
 
     A convenience over :func:`~codesign.learned.trainer.train_stack` with
     :class:`GRNNStack`, for tests and benchmarks that build specs by hand.
     """
     loop = Loop(steps=steps, batch=batch, horizon=horizon, clip=clip, curve_every=curve_every, dtype=dtype)
-    return train_stack(GRNNStack, [s.member() for s in specs], loop, activation=activation, engine=engine)
+    return train_stack(GRNNStack, [s.member() for s in specs], loop, activation=activation, engine=engine,
+                       readout=readout)

@@ -479,6 +479,7 @@ def simulated_design(instance, controller, *, method: str, params: dict, info_mo
     rollout that diverges, or a cost that is not finite, makes the design
     ``diverged`` with the rollout's message.
     """
+    start = time.perf_counter()
     rollout = simulate_to_precision(instance, controller)
     extras.update(rollout.summary())
     if stability_steps:
@@ -486,6 +487,9 @@ def simulated_design(instance, controller, *, method: str, params: dict, info_mo
         extras["bounded"] = bool(long.bounded)
         extras["max_state"] = float(long.max_state)
         extras["stability_steps"] = stability_steps
+    # Scoring, not design: ``seconds`` is the training's. The harness's own scoring leaves a design
+    # that has a cost alone, so this is where a learned design's scoring time is known at all.
+    extras["scoring_seconds"] = time.perf_counter() - start
     if not rollout.bounded or not np.isfinite(rollout.cost):
         return Design.failure(method, params, DIVERGED,
                               rollout.divergence or "the trained controller's validation rollout is unbounded",

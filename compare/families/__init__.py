@@ -14,10 +14,11 @@ Built-in families:
 ``mass_spring``, ``random_network``
     lqrsp's two examples (Lin, Fardad & Jovanović): a chain of masses and springs,
     unstable second-order nodes placed at random.
-``chain``, ``swing_grid``, ``platoon``
+``chain``, ``swing_grid``, ``platoon``, ``power_grid``
     The field's benchmark systems: the SLS toolboxes' doubly stochastic chain, the
     linearized swing equations on a randomized mesh (the SLS power-grid example),
-    and a string of vehicles (Lin, Fardad & Jovanović 2012); ``chain`` and
+    a string of vehicles (Lin, Fardad & Jovanović 2012), and published grids from ANDES
+    reduced to their machines (Dörfler et al. 2014's setting); ``chain`` and
     ``swing_grid`` take an actuation density (nodes without an actuator).
 
 A family of your own is a :class:`Family` passed to :func:`register_family` in a
@@ -36,7 +37,7 @@ __all__ = ["Family", "register_family", "get_family", "family_names", "UnknownFa
 _BUILTIN = {"paper": "compare.families.paper", "matrices": "compare.families.matrices",
             "mass_spring": "compare.families.mass_spring", "random_network": "compare.families.random_network",
             "chain": "compare.families.chain", "swing_grid": "compare.families.swing_grid",
-            "platoon": "compare.families.platoon"}
+            "platoon": "compare.families.platoon", "power_grid": "compare.families.power_grid"}
 _FAMILIES: dict[str, "Family"] = {}
 
 

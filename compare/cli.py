@@ -32,7 +32,7 @@ PRESET_TIMES = {
     "small": "~7-11 min (420-670 s measured, 536 s and 555 s on 2026-11-27)",
     "benchmark-systems": "~6-7 min (349-416 s measured, 377-378 s on 2026-11-27)",
     "scale-large": "~63 min (3806 s measured)",
-    "power": "~8 min (459 s measured on 2026-11-28, other jobs beside it)",
+    "power": "~4 min (234 s measured on 2026-11-28)",
 }
 
 

@@ -10,7 +10,7 @@ import pytest
 from compare.styles import METHOD_STYLES, style_for
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
-SHIPPED = ("quick", "scale", "systems", "table1", "tradeoff", "small", "benchmark-systems", "scale-large")
+SHIPPED = ("quick", "scale", "systems", "table1", "tradeoff", "small", "benchmark-systems", "scale-large", "power")
 
 
 def _label_kinds(folder: Path) -> dict:

@@ -32,3 +32,23 @@ def forbid_instance_builds(monkeypatch):
             monkeypatch.setitem(families._FAMILIES, name, replace(families.get_family(name), build=refuse))
 
     return forbid
+
+
+@pytest.fixture(scope="module")
+def uneven():
+    """Four nodes: node 0 has three states, node 2 one, the others two; node 1 has two inputs, node 3 none.
+
+    Shared by the GRNN node-block tests (shared and per-node readout).
+    """
+    import numpy as np
+
+    from codesign import Instance
+
+    rng = np.random.default_rng(11)
+    state_nodes = np.array([0, 1, 2, 3, 0, 1, 3, 0])
+    input_nodes = np.array([0, 1, 1, 2])
+    A = 0.3 * rng.standard_normal((8, 8)) + 0.6 * np.eye(8)
+    B = rng.standard_normal((8, 4))
+    ring = np.eye(4) + np.roll(np.eye(4), 1, axis=1) + np.roll(np.eye(4), -1, axis=1)
+    return Instance.from_matrices(A, B, Q=np.diag(rng.uniform(0.5, 2, 8)), R=np.diag(rng.uniform(0.5, 2, 4)),
+                                  comm_adj=ring, state_nodes=state_nodes, input_nodes=input_nodes, horizon=15)

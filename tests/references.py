@@ -90,16 +90,18 @@ def assert_bptt_matches_autograd(specs, x0, *, horizon: int, activation: str, en
 
 # -- autograd references of the hand-written BPTTs (the same losses, plain torch ops) --
 
-def grnn_loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon, activation="tanh"):
+def grnn_loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon, activation="tanh", per_node=False):
     """The GRNN loss of :func:`grnn_loss_and_grad` with torch.tanh, node-major and autograd-friendly.
 
-    ``x0`` has shape (M, B, p N) as in :func:`grnn_loss_and_grad`.
+    ``x0`` has shape (M, B, p N) as in :func:`grnn_loss_and_grad`. ``per_node``: each node reads
+    out with its own G_i (``G`` of shape (M, N h q)), u_i = Z_i G_i.
     """
     M, Bsz = x0.shape[:2]
     N, p, q = _node_sizes(prob, S.shape[1])
     h = W.shape[1]
     x = x0.transpose(1, 2)  # (M, p N, B): states slot-major
-    F3, G3 = F.reshape(M, p, h), G.reshape(M, h, q)
+    F3 = F.reshape(M, p, h)
+    G3 = G.reshape(M, N, h, q) if per_node else G.reshape(M, h, q)
     Z = torch.zeros(M, N, Bsz, h, dtype=x0.dtype)
     J = torch.zeros(M, dtype=x0.dtype)
     sigma = torch.tanh if activation == "tanh" else (lambda pre: pre)
@@ -107,7 +109,7 @@ def grnn_loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon, activati
         SZ = torch.einsum("mij,mjbk->mibk", S, Z)
         xin = torch.einsum("mcib,mck->mibk", x.reshape(M, p, N, Bsz), F3)
         Z = sigma(torch.einsum("mibk,mkl->mibl", SZ, W) + xin)
-        u = torch.einsum("mibk,mkc->mcib", Z, G3).reshape(M, q * N, Bsz)
+        u = torch.einsum("mibk,mikc->mcib" if per_node else "mibk,mkc->mcib", Z, G3).reshape(M, q * N, Bsz)
         J = J + torch.einsum("mib,mij,mjb->m", x, prob.Q, x) + torch.einsum("mib,mij,mjb->m", u, prob.R, u)
         x = torch.einsum("mij,mjb->mib", prob.A, x) + torch.einsum("mij,mjb->mib", prob.B, u)
     J = J + torch.einsum("mib,mij,mjb->m", x, prob.P, x)

@@ -10,10 +10,11 @@ from codesign import Instance, compare_exact_and_simulated, controller_from_arra
 from codesign.evaluation import impulse_responses
 from codesign.learned.engines import resolve_engine
 from codesign.learned.grnn import GRNNController, LinearGRNNController, _padded_problem
-from codesign.learned.grnn_bptt import (GRNNStack, ModelSpec, _node_sizes, _norm, _Problem, grnn_loss_and_grad,
+from codesign.learned.grnn_bptt import (GRNNStack, ModelSpec, _Problem, grnn_loss_and_grad,
                                         init_fwg, train_grnn)
 from codesign.learned.trainer import selection_set
 from compare.families.mass_spring import mass_spring_instance
+from references import grnn_loss_autograd  # tests/references.py
 
 SHORT = dict(steps=20, ensemble=1, stability_steps=30, curve_size=20)
 
@@ -21,19 +22,6 @@ SHORT = dict(steps=20, ensemble=1, stability_steps=30, curve_size=20)
 @pytest.fixture(scope="module")
 def inst():
     return paper_instance(3)
-
-
-@pytest.fixture(scope="module")
-def uneven():
-    """Four nodes: node 0 has three states, node 2 one, the others two; node 1 has two inputs, node 3 none."""
-    rng = np.random.default_rng(11)
-    state_nodes = np.array([0, 1, 2, 3, 0, 1, 3, 0])
-    input_nodes = np.array([0, 1, 1, 2])
-    A = 0.3 * rng.standard_normal((8, 8)) + 0.6 * np.eye(8)
-    B = rng.standard_normal((8, 4))
-    ring = np.eye(4) + np.roll(np.eye(4), 1, axis=1) + np.roll(np.eye(4), -1, axis=1)
-    return Instance.from_matrices(A, B, Q=np.diag(rng.uniform(0.5, 2, 8)), R=np.diag(rng.uniform(0.5, 2, 4)),
-                                  comm_adj=ring, state_nodes=state_nodes, input_nodes=input_nodes, horizon=15)
 
 
 def _spec(instance, m, *, hidden=4, per_node=True, G_noise=0.3, **kw):
@@ -49,30 +37,6 @@ def _spec(instance, m, *, hidden=4, per_node=True, G_noise=0.3, **kw):
                      state_index=padded["state_index"], **kw)
 
 
-def _loss_autograd(prob, S, F, W, G, x0, *, penalty, beta, horizon, activation):
-    """The per-node GRNN loss in plain torch ops (node-major), for autograd: u_i = Z_i G_i."""
-    M, Bsz = x0.shape[:2]
-    N, p, q = _node_sizes(prob, S.shape[1])
-    h = W.shape[1]
-    x = x0.transpose(1, 2)
-    F3, G4 = F.reshape(M, p, h), G.reshape(M, N, h, q)
-    Z = torch.zeros(M, N, Bsz, h, dtype=x0.dtype)
-    J = torch.zeros(M, dtype=x0.dtype)
-    sigma = torch.tanh if activation == "tanh" else (lambda pre: pre)
-    for _ in range(horizon):
-        SZ = torch.einsum("mij,mjbk->mibk", S, Z)
-        xin = torch.einsum("mcib,mck->mibk", x.reshape(M, p, N, Bsz), F3)
-        Z = sigma(torch.einsum("mibk,mkl->mibl", SZ, W) + xin)
-        u = torch.einsum("mibk,mikc->mcib", Z, G4).reshape(M, q * N, Bsz)
-        J = J + torch.einsum("mib,mij,mjb->m", x, prob.Q, x) + torch.einsum("mib,mij,mjb->m", u, prob.R, u)
-        x = torch.einsum("mij,mjb->mib", prob.A, x) + torch.einsum("mij,mjb->mib", prob.B, u)
-    J = J + torch.einsum("mib,mij,mjb->m", x, prob.P, x)
-    loss = J / Bsz + beta * S.abs().sum((1, 2))
-    for k, param in enumerate((S, F, W, G)):
-        loss = loss + penalty[:, k] * _norm(param)
-    return loss
-
-
 def _assert_matches_autograd(specs, x0, *, horizon, activation):
     prob = _Problem(specs, torch.float64)
     tensors = [torch.tensor(np.stack([getattr(s, name) for s in specs])) for name in ("S0", "F0", "W0", "G0")]
@@ -80,7 +44,8 @@ def _assert_matches_autograd(specs, x0, *, horizon, activation):
     penalty = torch.tensor([s.penalty for s in specs])
     beta = torch.tensor([s.beta for s in specs])
     leaves = [t.clone().requires_grad_(True) for t in tensors]
-    reference = _loss_autograd(prob, *leaves, x0, penalty=penalty, beta=beta, horizon=horizon, activation=activation)
+    reference = grnn_loss_autograd(prob, *leaves, x0, penalty=penalty, beta=beta, horizon=horizon,
+                                   activation=activation, per_node=True)
     reference.sum().backward()
     loss, grads = grnn_loss_and_grad(prob, *tensors, x0, penalty=penalty, beta=beta, horizon=horizon,
                                      activation=activation, readout="per_node")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from codesign import Instance, compare_exact_and_simulated, controller_from_arrays, count_links, get_method
+from codesign import compare_exact_and_simulated, controller_from_arrays, count_links, get_method
 from codesign.evaluation import impulse_responses
 from codesign.learned.grnn import GRNNController, LinearGRNNController, _padded_problem
 from codesign.learned.trainer import selection_set
@@ -19,19 +19,6 @@ SHORT = dict(steps=60, ensemble=1, stability_steps=50, curve_size=20)
 @pytest.fixture(scope="module")
 def chain():
     return mass_spring_instance(6, horizon=20)
-
-
-@pytest.fixture(scope="module")
-def uneven():
-    """Four nodes: node 0 has three states, node 2 one, the others two; node 1 has two inputs, node 3 none."""
-    rng = np.random.default_rng(11)
-    state_nodes = np.array([0, 1, 2, 3, 0, 1, 3, 0])
-    input_nodes = np.array([0, 1, 1, 2])
-    A = 0.3 * rng.standard_normal((8, 8)) + 0.6 * np.eye(8)
-    B = rng.standard_normal((8, 4))
-    ring = np.eye(4) + np.roll(np.eye(4), 1, axis=1) + np.roll(np.eye(4), -1, axis=1)
-    return Instance.from_matrices(A, B, Q=np.diag(rng.uniform(0.5, 2, 8)), R=np.diag(rng.uniform(0.5, 2, 4)),
-                                  comm_adj=ring, state_nodes=state_nodes, input_nodes=input_nodes, horizon=15)
 
 
 def _spec(instance, m, **kw):

@@ -24,8 +24,11 @@ import sys
 from collections import Counter
 from collections.abc import Mapping, Sequence
 
+import numpy as np
+
 from .names import SETTINGS_SUFFIX, short_names
 from .records import Records, as_records, canonical_key
+from .statistics import best_within
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -118,18 +121,10 @@ class Rung(tuple):
     statuses = property(lambda self: self[2])
 
 
-def _best_within(rs: Records, budget: float) -> float:
-    costs = [r.cost for r in rs if r.ok and r.links is not None and r.links <= budget]
-    return min(costs) if costs else math.inf
-
-
 def _median_over(instances: Sequence[Records], budget: float) -> float:
     """Median over a system's instances of the best cost within ``budget`` (an instance without one: inf)."""
-    values = sorted(_best_within(rs, budget) for rs in instances)
-    if not values:
-        return math.inf
-    mid = len(values) // 2
-    return values[mid] if len(values) % 2 else (values[mid - 1] + values[mid]) / 2
+    values = [best_within(rs, list(rs.by_instance), [budget])[0, 0] for rs in instances]
+    return float(np.median(values)) if values else math.inf
 
 
 def _entries(records: Records, asked: Sequence[str]) -> list[tuple[str, frozenset]]:

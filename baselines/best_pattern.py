@@ -40,7 +40,7 @@ from codesign.design import Design
 from codesign.methods import AtLeast, NotEmpty, method
 
 from ._common import Timer
-from .sparse_budget import INFO_MODELS, _admissible, check_budgets, gain_model
+from .sparse_budget import INFO_MODELS, admissible_links, check_budgets, gain_model
 
 __all__ = ["best_pattern", "automorphisms"]
 
@@ -138,7 +138,7 @@ def best_pattern(
         used), ``starts_to_best`` (the first start count at which the budget's best
         value was reached), ``certificate`` False.
     """
-    admissible = _admissible(instance)
+    admissible = admissible_links(instance)
     most = int(admissible.sum())
     checked = check_budgets(_fitting_budgets(most, max_patterns) if links is None else links, most)
     total = sum(math.comb(most, L) for L in checked)

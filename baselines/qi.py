@@ -46,6 +46,7 @@ __all__ = [
     "transmission_delays",
     "controller_delays",
     "propagation_delays",
+    "check_speed",
 ]
 
 
@@ -94,7 +95,7 @@ class QIResult:
 
 def transmission_delays(comm_adj, speed: float = 1) -> np.ndarray:
     """Steps for node j's information to reach node i: ``ceil(d_C(i, j) / speed)`` (inf if never)."""
-    speed = _check_speed(speed)
+    speed = check_speed(speed)
     hops = hop_distances(comm_adj)
     with np.errstate(invalid="ignore"):
         # Round before ceil so that, e.g., 3 hops at speed 1.5 is 2 steps, not 3.
@@ -150,7 +151,7 @@ def is_quadratically_invariant(instance, comm_adj, *, speed: float = 1, act_dela
     n = instance.nodes
     if comm.shape != (n, n):
         raise ValueError(f"comm_adj must have shape {(n, n)} (one row per node), got {comm.shape}")
-    speed = _check_speed(speed)
+    speed = check_speed(speed)
     act_delay = _check_act_delay(act_delay)
     D = controller_delays(comm, speed, act_delay)
     p = _by_node(propagation_delays(instance.A, instance.B), instance.state_nodes, instance.input_nodes, n)
@@ -210,7 +211,8 @@ def _check_act_delay(act_delay) -> int:
     return int(act_delay)
 
 
-def _check_speed(speed) -> float:
+def check_speed(speed) -> float:
+    """``speed`` (hops per step) as a float; a :class:`ValueError` unless it is a positive finite number."""
     if isinstance(speed, bool) or not isinstance(speed, (int, float, np.integer, np.floating)):
         raise ValueError(f"speed must be a positive number of hops per step, got {speed!r}")
     if not (math.isfinite(speed) and speed > 0):

@@ -41,7 +41,7 @@ from codesign.status import (FAILED, INACCURATE, INACCURATE_RTOL, INFEASIBLE, OP
                              vet_solver_cost)
 
 from ._common import Timer
-from .qi import _check_speed, is_quadratically_invariant
+from .qi import check_speed, is_quadratically_invariant
 
 __all__ = [
     "SLSController",
@@ -103,7 +103,7 @@ def support_hops(k: int, *, speed: float = 1.0, act_delay: int = 1) -> int:
 
 def checked_length(instance, speed, act_delay, horizon, fir) -> tuple[float, int]:
     """The checked ``speed`` and the problem's length T: the FIR length, else the horizon, else the instance's."""
-    speed = _check_speed(speed)
+    speed = check_speed(speed)
     if isinstance(act_delay, bool) or not isinstance(act_delay, (int, np.integer)) or act_delay < 0:
         raise ValueError(f"act_delay must be a non-negative integer, got {act_delay!r}")
     for label, value in (("horizon", horizon), ("fir", fir)):

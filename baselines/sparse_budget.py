@@ -47,23 +47,23 @@ from ._sparse import DecentralizedCache, as_path_point, gain_design, polished_ga
 from .sparse_admm import MAX_STATES as ADMM_MAX_STATES
 from .sparse_admm import MAX_STATES_REASON as ADMM_MAX_STATES_REASON
 from .sparse_admm import sparse_admm
-from .sparse_delayed import _gain_design as delayed_design
-from .sparse_delayed import _Nodes as DelayedNodes
+from .sparse_delayed import Nodes as DelayedNodes
 from .sparse_delayed import delayed_gain_cost_and_grad, stabilizing_delayed
+from .sparse_delayed import delayed_gain_design as delayed_design
 from .stabilizing import is_stable
 
-__all__ = ["sparse_budget", "budget_grid"]
+__all__ = ["sparse_budget", "budget_grid", "admissible_links"]
 
 INFO_MODELS = ("instantaneous", "delayed")
 
 
 def budget_grid(instance) -> list[int]:
     """The default budgets: 0, then 10 counts log-spaced up to every admissible link (largest first)."""
-    most = int(_admissible(instance).sum())
+    most = int(admissible_links(instance).sum())
     return sorted({int(round(x)) for x in np.geomspace(1, max(most, 1), 10)} | {0, most}, reverse=True)
 
 
-def _admissible(instance) -> np.ndarray:
+def admissible_links(instance) -> np.ndarray:
     """(N, N) node links a gain can have: off the diagonal, from nodes that have an input."""
     actuated = np.zeros(instance.nodes, dtype=bool)
     actuated[instance.input_nodes] = True
@@ -263,7 +263,7 @@ def sparse_budget(
         that does not stabilize is recorded ``diverged``; budget 0 is the decentralized
         gain.
     """
-    admissible = _admissible(instance)
+    admissible = admissible_links(instance)
     checked = check_budgets(budget_grid(instance) if links is None else links, int(admissible.sum()))
     model = gain_model(instance, info_model)
     with Timer() as timer:

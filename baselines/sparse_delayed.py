@@ -112,6 +112,8 @@ __all__ = [
     "polish_delayed",
     "stabilizing_delayed",
     "DelayedGainResult",
+    "delayed_gain_design",
+    "Nodes",
 ]
 
 METHOD = "sparse_delayed"
@@ -375,7 +377,7 @@ def _cost_and_grad(instance, local, K_delayed, *, grad: bool = True):
     return float(cost), g_local / scale, g_delayed / scale
 
 
-class _Nodes:
+class Nodes:
     """Where a delayed gain's free entries sit on an instance's nodes.
 
     With one state and one input per node the local part is the diagonal, kept as a
@@ -429,7 +431,7 @@ class _Nodes:
         return DelayedStaticGain(K_local, K_delayed, self.instance.state_nodes, self.instance.input_nodes)
 
 
-def _split(K_local, K_delayed, nodes: _Nodes | None = None):
+def _split(K_local, K_delayed, nodes: Nodes | None = None):
     K_local = np.asarray(K_local, dtype=float)
     K_delayed = np.asarray(K_delayed, dtype=float)
     if nodes is not None and nodes.blocks:
@@ -450,7 +452,7 @@ def delayed_gain_cost(instance, K_local, K_delayed) -> float:
     (the controller's free entries); on node blocks, ``K_local`` on each node's own
     block and ``K_delayed`` off them.
     """
-    nodes = _Nodes(instance)
+    nodes = Nodes(instance)
     local, K_delayed = _split(K_local, K_delayed, nodes)
     if nodes.blocks:
         return _cost_and_grad(instance, local, np.where(nodes.off, K_delayed, 0.0), grad=False)
@@ -488,7 +490,7 @@ def delayed_gain_cost_and_grad(instance, K_local, K_delayed) -> tuple[float, np.
     own-block entries on node blocks) and ``∂J/∂K_d = Σ_t g_t Φ_{t−1}'``: the augmented
     recursion's ``Σ_t 2 (R C + B̄'Π_{t+1} M) Σ_t`` with ``Σ_t = Y_t Y_t'`` factored.
     """
-    nodes = _Nodes(instance)
+    nodes = Nodes(instance)
     local, K_delayed = _split(K_local, K_delayed, nodes)
     if nodes.blocks:
         own, off = nodes.own, nodes.off
@@ -550,7 +552,7 @@ def polish_delayed(instance, K_local, K_delayed, free=None, *, gtol: float = _PO
         ``K_delayed``, ``cost``, ``grad_norm`` (Euclidean norm of the gradient over
         the free entries), ``success``, ``message``, ``iterations``, ``evaluations``.
     """
-    nodes = _Nodes(instance)
+    nodes = Nodes(instance)
     local, K_delayed = _split(K_local, K_delayed, nodes)
     shape = K_delayed.shape
     local = nodes.local_entries(local)
@@ -769,7 +771,7 @@ def stabilizing_delayed(instance, K_local, K_delayed, free, *, decentral: Decent
         ``gain`` the polished ``(K_local, K_delayed)`` (K_local as an (m, n) matrix),
         ``radius`` the augmented loop's, ``result`` the :class:`DelayedGainResult`.
     """
-    nodes = _Nodes(instance)
+    nodes = Nodes(instance)
     free = np.asarray(free, dtype=bool) & nodes.off
     zero = np.zeros((instance.m, instance.n))
 
@@ -791,7 +793,7 @@ def stabilizing_delayed(instance, K_local, K_delayed, free, *, decentral: Decent
 
 
 # -- from a gain to a design ---------------------------------------------------------
-def _masked_grad_norm(instance, nodes: _Nodes, local, K_delayed, free) -> tuple[float, float]:
+def _masked_grad_norm(instance, nodes: Nodes, local, K_delayed, free) -> tuple[float, float]:
     """(normalized cost, norm of its gradient over the local part and the ``free`` entries of K_delayed)."""
     cost, g_local, g_delayed = _cost_and_grad(instance, local, K_delayed)
     if g_local is None:
@@ -799,8 +801,8 @@ def _masked_grad_norm(instance, nodes: _Nodes, local, K_delayed, free) -> tuple[
     return cost, float(np.sqrt(np.sum(nodes.local_entries(g_local) ** 2) + np.sum(g_delayed[free] ** 2)))
 
 
-def _gain_design(instance, params: dict, local, K_delayed, *, extras: dict, free=None, seconds: float = 0.0,
-                 message: str = "") -> Design:
+def delayed_gain_design(instance, params: dict, local, K_delayed, *, extras: dict, free=None, seconds: float = 0.0,
+                        message: str = "") -> Design:
     """A scored :class:`Design` for the delayed gain, or a ``diverged`` record when it does not stabilize.
 
     ``local`` is diag(K_local) as a vector, or the block-diagonal (m, n) K_local on
@@ -812,7 +814,7 @@ def _gain_design(instance, params: dict, local, K_delayed, *, extras: dict, free
     ``K_delayed``) divided by that cost. A design at or above
     :data:`baselines._sparse.GRAD_RTOL` is flagged ``inaccurate``.
     """
-    nodes = _Nodes(instance)
+    nodes = Nodes(instance)
     K_local = nodes.local_matrix(local)
     radius = spectral_radius(delayed_closed_loop(instance, K_local, K_delayed))
     links, self_loops = count_links(nodes.support(K_local, K_delayed))
@@ -841,10 +843,10 @@ def _gain_design(instance, params: dict, local, K_delayed, *, extras: dict, free
 
 def _diagonal_design(instance, params: dict, diagonal: Design, extras: dict) -> Design:
     """The decentralized (diagonal, or block-diagonal) gain as a delayed gain with no links."""
-    local = _Nodes(instance).local(diagonal.controller.K)
-    return _gain_design(instance, params, local, np.zeros((instance.m, instance.n)),
-                        extras={"solver": "decentralized", "decentralized": True,
-                                "polish_message": diagonal.message, **extras})
+    local = Nodes(instance).local(diagonal.controller.K)
+    return delayed_gain_design(instance, params, local, np.zeros((instance.m, instance.n)),
+                               extras={"solver": "decentralized", "decentralized": True,
+                                       "polish_message": diagonal.message, **extras})
 
 
 @method(METHOD, label="Sparse delayed K (l1)", node_blocks=True, max_states=200,
@@ -946,7 +948,7 @@ def sparse_delayed(
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
 
     base = {"reweight": int(reweight), "eps_weight": float(eps_weight)}
-    nodes = _Nodes(instance)
+    nodes = Nodes(instance)
     l1_solve = _weighted_group_l1 if nodes.blocks else _weighted_l1
     decentral = DecentralizedCache(instance)
     diagonal = decentral.get()
@@ -991,8 +993,8 @@ def sparse_delayed(
                     extras.update(polish_start=found.start, polish_starts=found.tried)
                 if gamma == 0:  # the dense gain is the warm start of the path
                     local, K_delayed = polished.local, polished.K_delayed
-                design = _gain_design(instance, params, polished.local, polished.K_delayed, extras=extras,
-                                      free=free)
+                design = delayed_gain_design(instance, params, polished.local, polished.K_delayed, extras=extras,
+                                             free=free)
             if design.status in USABLE:
                 restart = (local, K_delayed, W)
             else:

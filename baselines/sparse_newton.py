@@ -43,7 +43,7 @@ import numpy as np
 from codesign.evaluation import STRUCTURED_ABOVE, spectral_radius
 # The static cost's masked-product blocks, reused rather than restated; the evaluation code is
 # in every method's fingerprint, so it is extended here, not there.
-from codesign.evaluation import _MaskedProduct
+from codesign.evaluation import MaskedProduct
 from codesign.methods import Above, AtLeast, NotEmpty, method
 
 from ._sparse import check_gammas, infinite_horizon_point, l1_path
@@ -67,7 +67,7 @@ MAX_STATES_REASON = ("each Newton step evaluates the infinite-horizon cost by de
                      "states, 8x that at 2000), and the path's few hundred steps were measured up to 1000")
 
 
-class _WorkingSetProduct(_MaskedProduct):
+class _WorkingSetProduct(MaskedProduct):
     def entries(self, M: np.ndarray, S: np.ndarray) -> np.ndarray:
         """The entries of ``M @ S`` on the mask (S symmetric), in ``np.nonzero(mask)`` order."""
         if self.full:

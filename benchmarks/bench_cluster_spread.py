@@ -37,14 +37,14 @@ def main():
     args = parser.parse_args()
     from distributed import Client, LocalCluster
 
-    from compare.execution import _limit_threads
+    from compare.execution import limit_threads
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         with Client(cluster) as client:
-            client.run(_limit_threads)
+            client.run(limit_threads)
             client.submit(batch, 30, 2, 1, pure=False).result()  # warm: imports, compiled kernels
             spread, remote = client.submit(batch, args.n, args.steps, args.instances, pure=False).result()
-    _limit_threads()
+    limit_threads()
     batch(30, 2, 1)
     alone, local = batch(args.n, args.steps, args.instances)
     same = all(a.cost == b.cost and all(np.array_equal(a.controller.arrays()[k], b.controller.arrays()[k])

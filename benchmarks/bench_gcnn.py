@@ -23,9 +23,9 @@ import numpy as np
 import torch
 
 from codesign import paper_instance
-from codesign.evaluation import _BLOCK_STATES, ROLLOUT_BOUND, _step_loop, simulate
+from codesign.evaluation import BLOCK_STATES, ROLLOUT_BOUND, simulate, step_loop
 from codesign.learned import GCNNController
-from codesign.learned.gcnn import _member, _parse
+from codesign.learned.gcnn import ensemble_member, parse_job
 from codesign.learned.gcnn_bptt import GCNNStack
 from codesign.learned.trainer import train_stack
 
@@ -70,19 +70,19 @@ def main():
     old, new = times.values()
     print(f"  ratio {old / new:.2f}x; largest difference in u {diff:.1e}")
     seconds = {}
-    for name, run in (("all at once", lambda: _step_loop(inst, c, x0, inst.horizon, 0.0, None, ROLLOUT_BOUND, 0.0)),
+    for name, run in (("all at once", lambda: step_loop(inst, c, x0, inst.horizon, 0.0, None, ROLLOUT_BOUND, 0.0)),
                       ("blocks", lambda: simulate(inst, c, x0, control_variates=False))):
         t = time.perf_counter()
         run()
         seconds[name] = time.perf_counter() - t
     print(f"  simulate's step loop, all draws at once {seconds['all at once']:7.2f} s, in blocks of "
-          f"{_BLOCK_STATES // inst.n} draws {seconds['blocks']:7.2f} s: ratio "
+          f"{BLOCK_STATES // inst.n} draws {seconds['blocks']:7.2f} s: ratio "
           f"{seconds['all at once'] / seconds['blocks']:.2f}x")
     print("GCNN training (10 models stacked, one thread), seconds per 750-step model:")
     insts = [paper_instance(s, n=20, a_norm=1.05) for s in range(10)]
     for dtype in ("float32", "float64"):
-        jobs = [_parse(i, dict(dtype=dtype, ensemble=1, steps=150)) for i in insts]
-        members = [_member(j, 0) for j in jobs]
+        jobs = [parse_job(i, dict(dtype=dtype, ensemble=1, steps=150)) for i in insts]
+        members = [ensemble_member(j, 0) for j in jobs]
         train_stack(GCNNStack, members[:1], jobs[0].settings.loop(inst.horizon), engine="fused")  # compile
         seconds = {}
         for engine in ("torch", "fused"):

@@ -20,18 +20,18 @@ import numpy as np
 def dense_draw(positions, degree):
     from scipy.sparse.csgraph import connected_components
 
-    from codesign.instances import _knn_graph
+    from codesign.instances import knn_graph
 
     nearest = np.argsort(np.abs(positions[:, None] - positions[None, :]), axis=1, kind="stable")[:, :degree]
-    comm = _knn_graph(positions, degree, nearest)
+    comm = knn_graph(positions, degree, nearest)
     return nearest, connected_components(comm, directed=False, return_labels=False) == 1
 
 
 def window_draw(positions, degree):
-    from codesign.instances import _is_connected, _knn_neighbours
+    from codesign.instances import is_connected, knn_neighbours
 
-    nearest = _knn_neighbours(positions, degree)
-    return nearest, _is_connected(nearest)
+    nearest = knn_neighbours(positions, degree)
+    return nearest, is_connected(nearest)
 
 
 def per_draw(draw, draws_of_positions, degree):

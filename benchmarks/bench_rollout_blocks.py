@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from codesign import paper_instance
-from codesign.evaluation import ROLLOUT_BOUND, _step_loop, simulate
+from codesign.evaluation import ROLLOUT_BOUND, simulate, step_loop
 from codesign.learned import GCNNController
 from codesign.learned.grnn import grnn_batch
 
@@ -44,8 +44,8 @@ def gcnn(n: int):
 def rollout_costs(inst, controller, x0, blocked: bool) -> np.ndarray:
     if blocked:
         return simulate(inst, controller, x0, control_variates=False).costs * inst.trace_P
-    return np.concatenate([_step_loop(inst, controller, x0[i:i + _OLD_BATCH], inst.horizon, 0.0, None,
-                                      ROLLOUT_BOUND, 0.0)[0] for i in range(0, x0.shape[0], _OLD_BATCH)])
+    return np.concatenate([step_loop(inst, controller, x0[i:i + _OLD_BATCH], inst.horizon, 0.0, None,
+                                     ROLLOUT_BOUND, 0.0)[0] for i in range(0, x0.shape[0], _OLD_BATCH)])
 
 
 def draws_per_second(n: int, blocked: bool, stop=None, seconds: float = 0.0) -> float:

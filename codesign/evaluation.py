@@ -49,6 +49,9 @@ __all__ = [
     "structured_operator",
     "control_variate_estimate",
     "impulse_responses",
+    "MaskedProduct",
+    "step_loop",
+    "BLOCK_STATES",
 ]
 
 VALIDATION_SIZE = 2000
@@ -73,7 +76,7 @@ _LOCAL_SCALE = 1e-4
 # a GCNN stepping 2000 draws at once ran at a sixth of its speed alone and slowed that worker 1.9x;
 # in blocks of 4000 states neither slows, at 20 nodes or 100 (benchmarks/bench_rollout_blocks.py;
 # 8000 states or more fall off the same cliff).
-_BLOCK_STATES = 4000
+BLOCK_STATES = 4000
 # The most recent draws a proposal's cost form is fitted on.
 _REFIT_DRAWS = 16000
 
@@ -117,7 +120,7 @@ STRUCTURED_ABOVE = FAST_DARE_ABOVE
 #: 29 ms dense, at n = 500 1.2 / 2.0 / 3.7 / 5.1 ms against 4.0 ms. They break even near
 #: 14 % at both sizes, and the CSR path pays a transposed copy per two products besides.
 SPARSE_DENSITY = 0.1
-# Rows of the gain per block of the masked gradient (see _MaskedProduct).
+# Rows of the gain per block of the masked gradient (see MaskedProduct).
 _MASK_BLOCK = 16
 # A masked gradient whose blocks would do more than this fraction of the full product's
 # multiply-adds takes the full product (one large BLAS call) and picks the entries.
@@ -297,7 +300,7 @@ class _ClosedLoop:
         return self.acl @ self._times_symmetric(sigma, self.acl_t, self.acl)
 
 
-class _MaskedProduct:
+class MaskedProduct:
     """The entries of ``sum_t M_t S_t`` on a mask, for symmetric ``S_t``, without the full products.
 
     Entry (i, j) of ``M S`` is row i of M dotted with row j of S (S symmetric). Rows of the
@@ -401,7 +404,7 @@ def static_gain_cost_and_grad(instance, K, *, mask=None) -> tuple[float, np.ndar
     mask : array_like of bool, shape (m, n), optional
         Entries of the gradient wanted; the others are returned as 0. Above
         :data:`STRUCTURED_ABOVE` states only these entries are computed
-        (:class:`_MaskedProduct`); at and below, the full gradient is computed
+        (:class:`MaskedProduct`); at and below, the full gradient is computed
         and restricted, so its masked entries are those of the unmasked call.
 
     Returns
@@ -437,7 +440,7 @@ def _structured_cost_and_grad(instance, K, mask):
     sigmas = [np.eye(instance.n)]
     for _ in range(instance.horizon - 1):
         sigmas.append(loop.covariance_step(sigmas[-1]))
-    product = None if mask is None else _MaskedProduct(loop.gain_order(mask))
+    product = None if mask is None else MaskedProduct(loop.gain_order(mask))
     grad = np.zeros_like(K)
     P = loop.terminal
     for t in range(instance.horizon - 1, -1, -1):
@@ -657,7 +660,7 @@ def simulate(
         costs, bounded = result[0], True
         max_state = float(max([max_state, *result[1]]))
     elif rng is not None:  # one noise draw per step for the whole batch, so not in blocks
-        costs, bounded, max_state = _step_loop(instance, controller, x, steps, noise_std, rng, bound, max_state)
+        costs, bounded, max_state = step_loop(instance, controller, x, steps, noise_std, rng, bound, max_state)
     else:
         costs, bounded, max_state = _step_loop_in_blocks(instance, controller, x, steps, bound, max_state)
     costs = costs / instance.trace_P
@@ -671,7 +674,7 @@ def simulate(
     return Rollout(cost, stderr, costs, True, max_state, steps, plain, plain_stderr, estimator)
 
 
-def _step_loop(instance, controller, x, steps, noise_std, rng, bound, max_state):
+def step_loop(instance, controller, x, steps, noise_std, rng, bound, max_state):
     """:func:`simulate`'s rollout one step at a time: costs (not divided by trace P), bounded, max_state.
 
     An unbounded rollout stops at the first step whose largest state leaves ``bound``.
@@ -697,14 +700,14 @@ def _step_loop(instance, controller, x, steps, noise_std, rng, bound, max_state)
 
 
 def _step_loop_in_blocks(instance, controller, x, steps, bound, max_state):
-    """:func:`_step_loop` (noiseless) over blocks of draws sized to stay in cache; each block stops
+    """:func:`step_loop` (noiseless) over blocks of draws sized to stay in cache; each block stops
     on its own when it leaves ``bound``."""
-    size = max(1, _BLOCK_STATES // instance.n)
+    size = max(1, BLOCK_STATES // instance.n)
     costs, bounded = np.empty(x.shape[0]), True
     for start in range(0, x.shape[0], size):
         block = slice(start, start + size)
-        costs[block], block_bounded, max_state = _step_loop(instance, controller, x[block], steps, 0.0, None,
-                                                            bound, max_state)
+        costs[block], block_bounded, max_state = step_loop(instance, controller, x[block], steps, 0.0, None,
+                                                           bound, max_state)
         bounded = bounded and block_bounded
     return costs, bounded, max_state
 

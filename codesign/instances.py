@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["Instance", "InstanceError", "check_instance", "paper_instance", "hop_distances", "node_ranks",
-           "node_width"]
+           "node_width", "knn_neighbours", "is_connected", "knn_graph"]
 
 
 class InstanceError(ValueError):
@@ -433,7 +433,7 @@ def _bridge_gaps(adj: np.ndarray, positions: np.ndarray) -> None:
             adj[left, right] = adj[right, left] = 1.0
 
 
-def _knn_neighbours(positions: np.ndarray, degree: int) -> np.ndarray:
+def knn_neighbours(positions: np.ndarray, degree: int) -> np.ndarray:
     """Each node's ``degree`` nearest positions (itself included), as ``(n, degree)`` indices.
 
     The same sets as ``np.argsort(|x_i - x_j|, axis=1, kind="stable")[:, :degree]`` (ties to the
@@ -464,7 +464,8 @@ def _knn_neighbours(positions: np.ndarray, degree: int) -> np.ndarray:
     return nearest
 
 
-def _is_connected(nearest: np.ndarray) -> bool:
+def is_connected(nearest: np.ndarray) -> bool:
+    """Whether the kNN graph of ``nearest`` (:func:`knn_neighbours`, links taken both ways) is connected."""
     import scipy.sparse
     from scipy.sparse.csgraph import connected_components
 
@@ -474,10 +475,14 @@ def _is_connected(nearest: np.ndarray) -> bool:
     return connected_components(links, directed=False, return_labels=False) == 1
 
 
-def _knn_graph(positions: np.ndarray, degree: int, nearest: np.ndarray | None = None) -> np.ndarray:
+def knn_graph(positions: np.ndarray, degree: int, nearest: np.ndarray | None = None) -> np.ndarray:
+    """The symmetric (n, n) 0/1 adjacency linking each position to its ``degree`` nearest (itself included).
+
+    ``nearest``: the neighbours :func:`knn_neighbours` gives, where the caller has them already.
+    """
     n = positions.size
     if nearest is None:
-        nearest = _knn_neighbours(positions, degree)
+        nearest = knn_neighbours(positions, degree)
     adj = np.zeros((n, n))
     rows = np.repeat(np.arange(n), degree)
     adj[rows, nearest.ravel()] = 1.0
@@ -592,13 +597,13 @@ def paper_instance(
         # The neighbours on the sorted line and scipy's components on n * degree links, not the
         # dense graph: a draw then costs milliseconds at 3000 nodes instead of 0.6 s, so the
         # MAX_REDRAWS draws that end a hopeless redraw take seconds, not ten minutes.
-        nearest = _knn_neighbours(positions, degree)
+        nearest = knn_neighbours(positions, degree)
         if connect == "bridge":
-            comm = _knn_graph(positions, degree, nearest)
+            comm = knn_graph(positions, degree, nearest)
             _bridge_gaps(comm, positions)
             break
-        if _is_connected(nearest):
-            comm = _knn_graph(positions, degree, nearest)
+        if is_connected(nearest):
+            comm = knn_graph(positions, degree, nearest)
             break
     else:
         raise InstanceError(f"no connected {degree}-nearest-neighbour graph on {n} nodes in {MAX_REDRAWS} draws "

@@ -6,6 +6,12 @@ The sentences are chosen by rules, in this order (docs/reports.md, "The answer")
     :mod:`compare.ladder`): whether some design within its first link budget comes within
     ``near`` % of LQR on each system, then a list, one item per system, of each method's
     best cost within every budget (the list is not counted among the sentences).
+(0') **Decomposition.** Where the records hold the paper's GRNN-Sparse, the per-node one
+    from random weights and the per-node one warm-started from the delayed ℓ1 path beside the
+    delayed static designs (:mod:`compare.decomposition`): the excess of the paper's design
+    over the best delayed static design split into model class and training, with intervals;
+    divergence with and without the warm start on the system with the largest open-loop
+    spectral radius; and whether the nonlinearity adds anything at equal information and links.
 (a) **Failures.** A method that diverges or fails (:data:`codesign.status.DIVERGED`,
     :data:`~codesign.status.FAILED`) on at least half of a panel's instances, or whose
     median best cost there is above :data:`FAILURE_COST` × LQR, while another design
@@ -31,7 +37,8 @@ The sentences are chosen by rules, in this order (docs/reports.md, "The answer")
     or more in what doing nothing (u = 0) costs over LQR: u = 0's cost at the easiest and
     hardest of them, and the gap at each.
 
-Rules (0) and (a) to (c) each add their sentences, (e) only where none of (0), (b) and (c) did, and
+Rules (0), (0') and (a) to (c) each add their sentences ((c) not beside (0')), (e) only where none of (0),
+(0'), (b) and (c) did, and
 (d) follows the result of (c) or (e) it qualifies; the first :data:`MAX_SENTENCES` are kept.
 """
 
@@ -44,6 +51,7 @@ import numpy as np
 
 from codesign.status import DIVERGED, FAILED
 
+from .decomposition import decomposition_sentences
 from .findings import ALPHA, BOUND_LABEL, Comparison, budgets_per_node, holm, sign_test
 from .ladder import ladder_lines
 from .names import short_names
@@ -373,7 +381,14 @@ def pooled_sentence(comparisons: Sequence[Comparison], order: Mapping,
 
 def claim_sentence(comparisons: Sequence[Comparison], order: Mapping, names: Mapping) -> tuple[str, list] | None:
     """Rule (e): the same-information pair that beats in the most cells, said briefly."""
-    from .findings_text import _models, _range, _scope, _short, _side, _the
+    from .findings_text import (
+        models_text,
+        range_text,
+        scope_text,
+        short_label,
+        side_of,
+        with_article,
+    )
 
     pairs: dict[tuple, list] = {}
     for c in comparisons:
@@ -384,9 +399,9 @@ def claim_sentence(comparisons: Sequence[Comparison], order: Mapping, names: Map
         claims = [c for c in cells if c.significant]
         if not claims:
             continue
-        votes = [_side(c) for c in claims]
+        votes = [side_of(c) for c in claims]
         side = -1 if votes.count(-1) > votes.count(1) else 1
-        lead = [c for c in claims if _side(c) == side]
+        lead = [c for c in claims if side_of(c) == side]
         weakest = min(min(abs(c.paired.low), abs(c.paired.high)) for c in lead)
         rank = (-len(lead), _group_rank(key[0]), order[key], -weakest)
         if best_key is None or rank < best_key:
@@ -397,11 +412,11 @@ def claim_sentence(comparisons: Sequence[Comparison], order: Mapping, names: Map
     c0 = lead[0]
     winner, loser = (c0.a, c0.b) if side < 0 else (c0.b, c0.a)
     beaten_by_bound = c0.b == BOUND_LABEL and side > 0
-    verdict = f"{c0.a} is beaten by the {c0.b}" if beaten_by_bound else f"{_the(winner)} beats {_the(loser)}"
-    models = _models(c0, c0.a if beaten_by_bound else winner)
+    verdict = f"{c0.a} is beaten by the {c0.b}" if beaten_by_bound else f"{with_article(winner)} beats {with_article(loser)}"
+    models = models_text(c0, c0.a if beaten_by_bound else winner)
     holm_p = max(c.p_holm for c in lead)
-    text = (f"{verdict} {models} {_scope(lead, cells, names)}: {_short(loser, winner)} costs "
-            f"{_range([side * c.paired.median for c in lead])} more per instance (median paired difference, "
+    text = (f"{verdict} {models} {scope_text(lead, cells, names)}: {short_label(loser, winner)} costs "
+            f"{range_text([side * c.paired.median for c in lead])} more per instance (median paired difference, "
             f"{'each' if len(lead) > 1 else 'its'} 95 % interval excluding 0; Holm p ≤ {_p(holm_p)}).")
     return text[0].upper() + text[1:], lead
 
@@ -451,7 +466,7 @@ def difficulty_sentence(records, cells: Sequence[Comparison], names: Mapping) ->
     if easy not in gap or hard not in gap:
         return None
     c0 = cells[0]
-    from .findings_text import _fmt
+    from .findings_text import number_text
 
     short = short_names({c0.a, c0.b})
     difference = f"{_subject(c0.a, short)} − {_subject(c0.b, short).removeprefix('the ')}"
@@ -466,8 +481,8 @@ def difficulty_sentence(records, cells: Sequence[Comparison], names: Mapping) ->
                if nothing[easy] - 1 < 0.1 else "")
     return (f"How hard the problem is changes across these panels: doing nothing (u = 0) costs "
             f"{_excess(nothing[easy])} over LQR on {names[easy]} but {_excess(nothing[hard])} on {names[hard]}"
-            f"{bounded}; on those two panels {difference} is {_fmt(gap[easy])}{share(easy)} and "
-            f"{_fmt(gap[hard])}{share(hard)} {'with any number of links' if tier is None else f'within {tier:g} links'}"
+            f"{bounded}; on those two panels {difference} is {number_text(gap[easy])}{share(easy)} and "
+            f"{number_text(gap[hard])}{share(hard)} {'with any number of links' if tier is None else f'within {tier:g} links'}"
             ", median paired differences.")
 
 
@@ -488,22 +503,23 @@ def answer_lines(records, comparisons: Sequence[Comparison], *, meta=None, membe
         The store's metadata and the experiments' members: rule (b) needs them to find
         the experiments that ask for Table 1.
     """
-    from .findings_text import _panel_names
+    from .findings_text import panel_names
 
     records = as_records(records)
     all_panels = sorted(records.by_panel, key=_panel_order)
-    report_names = _panel_names(all_panels) if all_panels else {}
-    cell_names = _panel_names(list(dict.fromkeys(c.panel for c in comparisons))) if comparisons else {}
+    report_names = panel_names(all_panels) if all_panels else {}
+    cell_names = panel_names(list(dict.fromkeys(c.panel for c in comparisons))) if comparisons else {}
     order = {}
     for c in comparisons:
         order.setdefault((c.group, c.a, c.b), len(order))
     flagged: set = set()
     ladder, ladder_details = ladder_lines(records, meta, members)
-    sentences = ladder + failure_sentences(records, report_names, flagged)
+    parts = decomposition_sentences(records)
+    sentences = ladder + parts + failure_sentences(records, report_names, flagged)
     reproduction = reproduction_sentences(records, meta, members)
     sentences += reproduction
-    result = pooled_sentence(comparisons, order, flagged) if comparisons else None
-    if result is None and not reproduction and not ladder and comparisons:
+    result = pooled_sentence(comparisons, order, flagged) if comparisons and not parts else None
+    if result is None and not reproduction and not ladder and not parts and comparisons:
         result = claim_sentence(comparisons, order, cell_names)
     if result is not None:
         text, cells = result

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .figures import (OFF_SCALE, _y_limits, boundary_handles, draw_boundary, draw_front_line, shared_y, excess,
-                      excess_axis, finish_legend, legend_handles, links_axis, method_gid, panel_figure, panel_heading)
+from .figures import (OFF_SCALE, boundary_handles, draw_boundary, draw_front_line, shared_y, excess, excess_axis,
+                      finish_legend, legend_handles, links_axis, method_gid, panel_figure, panel_heading, y_limits)
 from .records import as_records
 from .statistics import best_within, front_quantiles
 from .styles import Style
@@ -228,7 +228,7 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
     if fronts is None:
         fronts = budget_fronts(records) if records is not None else []
 
-    limits = _y_limits(axis_costs(points, fronts)) if shared_y(panels) else None
+    limits = y_limits(axis_costs(points, fronts)) if shared_y(panels) else None
     for panel in panels:
         ax = axes[panel]
         usable = [p for p in points if p.panel == panel and p.ok > 0]
@@ -236,7 +236,7 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
             continue
         mine = {f.label: f for f in fronts if f.panel == panel}
         scale = panel[1] if per_node and panel[1] else 1.0  # links per node; 0: a family without n
-        bottom, top = limits or _y_limits(axis_costs(usable, mine.values()))
+        bottom, top = limits or y_limits(axis_costs(usable, mine.values()))
         right = max(p.links[2] for p in usable) / scale
         for label, rs in (designs[panel].by_label.items() if panel in designs else ()):
             ok = [r for r in rs if r.ok]

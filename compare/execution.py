@@ -5,7 +5,7 @@ in one call) and returns, run by run, a :class:`RunResult`: the scored designs, 
 wall seconds, the seconds spent scoring the designs, and the process's resident
 memory at the start of the run and at its peak. Any exception, or a method's
 ``sys.exit``, becomes that run's ``failed`` design. Worker processes
-(:mod:`compare.pool`, or a dask worker) call it after :func:`_limit_threads`;
+(:mod:`compare.pool`, or a dask worker) call it after :func:`limit_threads`;
 :mod:`compare.runner` calls it directly with one worker.
 """
 
@@ -30,12 +30,13 @@ from .registry import get_method
 from .spec import Run
 
 __all__ = ["build_instance", "instance_facts", "execute_run", "execute_task", "execute_task_sendable", "failed_run",
-           "unsendable", "sendable_results", "reissue_warnings", "RunResult", "ExecutorError", "WorkerSetupError"]
+           "unsendable", "sendable_results", "reissue_warnings", "RunResult", "ExecutorError", "WorkerSetupError",
+           "limit_threads", "THREAD_VARS"]
 
 # RAYON_NUM_THREADS: Clarabel's faer factorization runs on a rayon pool that otherwise takes every
 # core (seen: SLS at N = 100 kept a second thread busy, so two workers ran three threads on 2 cores).
-_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS",
-                "RAYON_NUM_THREADS")
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS",
+               "RAYON_NUM_THREADS")
 
 
 def build_instance(instance_spec: dict):
@@ -340,7 +341,7 @@ def execute_task(runs: list[Run], plugins=()) -> list[RunResult]:
 _LIMITS = []  # the worker's threadpoolctl limits, kept for the process's lifetime
 
 
-def _limit_threads() -> None:
+def limit_threads() -> None:
     """Make this (worker) process single-threaded in every thread pool.
 
     Runs as the pool's initializer, after unpickling it imported this module and with
@@ -351,7 +352,7 @@ def _limit_threads() -> None:
     cover those loaded later (MKL in SCS, rayon in Clarabel, OpenMP), and torch is
     set directly.
     """
-    for var in _THREAD_VARS:
+    for var in THREAD_VARS:
         os.environ[var] = "1"
     from threadpoolctl import threadpool_limits
 

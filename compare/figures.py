@@ -26,7 +26,8 @@ from .styles import BOUND_COLOUR, INFO_MODELS, INFO_ORDER, Style, label_styles  
 
 __all__ = ["LINESTYLES", "OFF_SCALE", "FLOOR", "excess", "excess_axis", "panel_grid", "panel_heading",
            "legend_handles", "finish_legend", "draw_boundary", "boundary_handles", "plot_budget_fronts",
-           "label_styles", "method_gid", "front_gid", "draw_front_line", "drawn_styles", "axis_floor", "panel_figure"]
+           "label_styles", "method_gid", "front_gid", "draw_front_line", "drawn_styles", "axis_floor", "panel_figure",
+           "y_limits"]
 
 #: Line style and description per information model (from :data:`compare.styles.INFO_MODELS`).
 LINESTYLES = {info: (style, text) for info, (style, _, text) in INFO_MODELS.items()}
@@ -120,7 +121,7 @@ def shared_y(panels) -> bool:
     return len(sizes) > 1 and len(norms) > 1 and None not in norms
 
 
-def _y_limits(shown) -> tuple[float, float]:
+def y_limits(shown) -> tuple[float, float]:
     """(bottom, top) of an excess-cost axis showing the costs ``shown`` (all at most OFF_SCALE)."""
     shown = np.asarray(shown, dtype=float)
     return axis_floor(shown), (float(shown.max()) if shown.size else OFF_SCALE) - 1.0
@@ -269,7 +270,7 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
         finite = np.append(finite, extra)
         return finite[finite <= OFF_SCALE]
 
-    limits = _y_limits(shown_costs(fronts)) if shared_y(panels) else None
+    limits = y_limits(shown_costs(fronts)) if shared_y(panels) else None
     above, partial, missing = {}, {}, {}
     for panel in panels:
         ax = axes[panel]
@@ -278,7 +279,7 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
         right = max(float(f.budgets[-1]) for f in mine) / scale
         if not any(np.isfinite(f.cost[1]).any() for f in mine):
             continue
-        bottom, top = limits or _y_limits(shown_costs(mine))
+        bottom, top = limits or y_limits(shown_costs(mine))
         for f in mine:
             s = _style(styles, f.label)
             # Not started (inf) leaves a gap, not a line off the axis.

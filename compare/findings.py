@@ -53,11 +53,18 @@ import numpy as np
 from scipy import stats
 
 from .records import Records, as_records
-from .statistics import (Paired, best_within, front_quantiles, instances_by_panel, paired_difference, panel_budgets,
-                         panel_nodes)
-from .styles import Style, style_for
+from .statistics import (
+    Paired,
+    best_within,
+    front_quantiles,
+    instances_by_panel,
+    paired_difference,
+    panel_budgets,
+    panel_nodes,
+)
+from .styles import GRNN_KINDS, Style, grnn_kinds, style_for
 
-__all__ = ["UNCERTAIN_RSE", "BOUND_LABEL", "ALPHA", "PRACTICAL_MARGIN", "Comparison", "is_unresolved", "unresolved", "is_sls_bound",
+__all__ = ["arm_labels", "UNCERTAIN_RSE", "BOUND_LABEL", "ALPHA", "PRACTICAL_MARGIN", "Comparison", "is_unresolved", "unresolved", "is_sls_bound",
            "select_comparisons", "holm", "sign_test", "budgets_per_node"]
 
 #: Above this relative standard error a simulated cost is unresolved: not a number to compare
@@ -110,25 +117,40 @@ def _linear(r) -> bool:
     return r.params.get("activation") == "identity"
 
 
-def _arm_labels(records: Records) -> list[str]:
+def _kinds(r) -> tuple:
+    """A GRNN design's readout and start (:func:`compare.styles.grnn_kinds`): () for the paper's."""
+    return tuple(grnn_kinds(r.method, r.params))
+
+
+def _grnn_words(r, activation: bool, kinds: bool) -> str:
+    words = (["linear" if _linear(r) else "tanh"] if activation else [])
+    if kinds:
+        words += [GRNN_KINDS[k][1] if k in GRNN_KINDS else k.replace("_", " ") for k in _kinds(r)] or ["paper"]
+    return ", ".join(words)
+
+
+def arm_labels(records: Records) -> list[str]:
     """The label each design is compared under (one per design, in order).
 
     Its own label, except: the SLS bound is :data:`BOUND_LABEL`; a label shared by
-    tanh and linear GRNN designs is split by activation; a label shared by SLS
-    designs on several graphs is split by graph.
+    GRNN designs of different kinds is split by what differs: the activation (tanh,
+    linear), the readout and the start ("per-node", "warm: delayed"; "paper" for the
+    paper's shared readout from a random draw); a label shared by SLS designs on
+    several graphs is split by graph.
     """
-    activations, graphs = {}, {}
+    activations, kinds, graphs = {}, {}, {}
     for r in records:
         if r.method.startswith("grnn"):
             activations.setdefault(r.label, set()).add(_linear(r))
+            kinds.setdefault(r.label, set()).add(_kinds(r))
         if r.method in _SLS:
             graphs.setdefault(r.label, set()).add("bound" if is_sls_bound(r) else r.params.get("graph"))
     out = []
     for r in records:
         if is_sls_bound(r):
             out.append(BOUND_LABEL)
-        elif r.method.startswith("grnn") and len(activations[r.label]) > 1:
-            out.append(f"{r.label} ({'linear' if _linear(r) else 'tanh'})")
+        elif r.method.startswith("grnn") and (len(activations[r.label]) > 1 or len(kinds[r.label]) > 1):
+            out.append(f"{r.label} ({_grnn_words(r, len(activations[r.label]) > 1, len(kinds[r.label]) > 1)})")
         elif r.method in _SLS and len(graphs[r.label]) > 1:
             out.append(f"{r.label}: {r.params.get('graph', 'plant')} graph")
         else:
@@ -143,6 +165,7 @@ class _Arm:
     label: str
     method: str
     linear: bool
+    kinds: tuple
     graph: str | None
     info_model: str
     original: str
@@ -157,8 +180,8 @@ def _arms(records: Records, labels: list[str]) -> dict[str, _Arm]:
     for label, rs in grouped.items():
         first = rs[0]
         info = Counter(r.info_model or "?" for r in rs).most_common(1)[0][0]
-        out[label] = _Arm(label, first.method, _linear(first), first.params.get("graph"), info, first.label,
-                          style_for(first.method, first.params, info))
+        out[label] = _Arm(label, first.method, _linear(first), _kinds(first), first.params.get("graph"), info,
+                          first.label, style_for(first.method, first.params, info))
     return out
 
 
@@ -322,12 +345,19 @@ def _plan(arms: Mapping[str, _Arm], pairs: Iterable) -> list[tuple[str, str, obj
         return [a.label for a in arms.values()
                 if a.method in methods and (linear is None or a.linear == linear) and a.label != BOUND_LABEL]
 
-    learned = sorted(by_method(*_LEARNED), key=lambda x: (_LEARNED.index(arms[x].method), arms[x].linear, x))
+    learned = sorted(by_method(*_LEARNED), key=lambda x: (_LEARNED.index(arms[x].method), arms[x].linear, arms[x].kinds, x))
     static_delayed = by_method("sparse_delayed")
     same = "same information model: delayed"
     plan = [(a, b, budgets, same) for a in learned for b in static_delayed]
     plan += [(a, b, budgets, same) for a in by_method("grnn_sparse", linear=True)
-             for b in by_method("grnn_sparse", linear=False)]
+             for b in by_method("grnn_sparse", linear=False) if arms[a].kinds == arms[b].kinds]
+    # Why a GRNN-Sparse design loses (compare.decomposition): the model class (per-node against the
+    # shared readout, both from random) and the training (a warm start against the random draw).
+    sparse = [arms[x] for x in by_method("grnn_sparse")]
+    plan += [(a.label, b.label, budgets, same) for a in sparse for b in sparse
+             if a.linear == b.linear and a.kinds == ("per_node",) and b.kinds == ()]
+    plan += [(a.label, b.label, budgets, same) for a in sparse for b in sparse
+             if a.linear == b.linear and len(a.kinds) == 2 and a.kinds[0] == "per_node" and b.kinds == ("per_node",)]
     if BOUND_LABEL in arms:
         plant_sls = [a.label for a in arms.values() if a.method in _SLS and a.graph == "plant"
                      and a.label != BOUND_LABEL]
@@ -335,6 +365,8 @@ def _plan(arms: Mapping[str, _Arm], pairs: Iterable) -> list[tuple[str, str, obj
                  for a in learned + static_delayed + plant_sls]
     instantaneous = by_method("sparse_admm") or by_method("sparse_sdp")
     tanh_sparse = by_method("grnn_sparse", linear=False)
+    # Cross-model context for the paper's GRNN-Sparse only, where other kinds of it stand beside it.
+    tanh_sparse = [x for x in tanh_sparse if not arms[x].kinds] or tanh_sparse
     cross = [(a, b, budgets) for a in tanh_sparse for b in instantaneous]
     cross += [(a, b, budgets) for a in tanh_sparse for b in by_method("decentralized")]
     cross += [(a, b, (None,)) for a in by_method("gcnn") for b in instantaneous]
@@ -405,7 +437,7 @@ def select_comparisons(records, *, budgets=None, pairs=()) -> list[Comparison]:
         within the budget are left out.
     """
     records = as_records(records)
-    labels = _arm_labels(records)
+    labels = arm_labels(records)
     arms = _arms(records, labels)
     panels = instances_by_panel(records)
     by_panel = records.by_panel

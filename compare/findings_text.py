@@ -17,9 +17,17 @@ from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .findings import ALPHA, BOUND_LABEL, PRACTICAL_MARGIN, UNCERTAIN_RSE, Comparison, budgets_per_node
+from .findings import (
+    ALPHA,
+    BOUND_LABEL,
+    PRACTICAL_MARGIN,
+    UNCERTAIN_RSE,
+    Comparison,
+    budgets_per_node,
+)
 
-__all__ = ["findings_markdown", "complete_plant_panels", "repaired_instances", "EQUAL_WORDS"]
+__all__ = ["findings_markdown", "complete_plant_panels", "repaired_instances", "EQUAL_WORDS", "number_text",
+           "range_text", "side_of", "with_article", "short_label", "panel_names", "scope_text", "models_text"]
 
 # A cell's verdict, each worded one way in the text (defined in the Statistics line): "beats" (a claim: interval
 # excludes 0, Holm p < ALPHA, beyond the margin, the fronts agree), "costs more/less ..., not significant after Holm's
@@ -35,7 +43,7 @@ EQUAL_WORDS = f"equal within {100 * PRACTICAL_MARGIN:g} % of LQR's cost"
 _NORM_PREFIX = "‖A‖₂ = "
 
 
-def _fmt(x: float) -> str:
+def number_text(x: float) -> str:
     """A number in the text: signed, two significant digits, a true minus."""
     if x == 0:
         return "0"
@@ -54,9 +62,9 @@ def _span(values: Iterable) -> str:
     return str(values[0]) if len(values) == 1 else f"{values[0]}–{values[-1]}"
 
 
-def _range(values: Sequence[float]) -> str:
+def range_text(values: Sequence[float]) -> str:
     """"+0.018 to +0.082", or one number where they round alike."""
-    low, high = _fmt(min(values)), _fmt(max(values))
+    low, high = number_text(min(values)), number_text(max(values))
     return low if low == high else f"{low} to {high}"
 
 
@@ -87,7 +95,7 @@ def _level(c: Comparison) -> str:
     return _BEATS if c.significant else _DIRECTION
 
 
-def _side(c: Comparison) -> int:
+def side_of(c: Comparison) -> int:
     """−1 where a costs less than b, +1 where it costs more (by the interval, else by the wins), 0: split.
 
     For a mixed cell, the side the typical instance (the paired median) favours.
@@ -98,7 +106,7 @@ def _side(c: Comparison) -> int:
     return int(np.sign(p.b_wins - p.a_wins))
 
 
-def _the(label: str) -> str:
+def with_article(label: str) -> str:
     return f"the {label}" if label == BOUND_LABEL else label
 
 
@@ -108,7 +116,7 @@ def _strip(label: str) -> str:
     return label.rsplit(" (", 1)[0] if label.endswith(")") and " (" in label else label
 
 
-def _short(label: str, other: str) -> str:
+def short_label(label: str, other: str) -> str:
     """The name in a bullet's body, once its headline has given the full one: without the trailing parenthesis,
     unless that leaves it a prefix of the other's (SLS against the SLS bound)."""
     mine, theirs = _strip(label), _strip(other)
@@ -117,7 +125,7 @@ def _short(label: str, other: str) -> str:
     return f"the {mine}" if label == BOUND_LABEL else mine
 
 
-def _panel_names(panels: Sequence[tuple]) -> dict[tuple, str]:
+def panel_names(panels: Sequence[tuple]) -> dict[tuple, str]:
     """Short names: what tells the panels apart (‖A‖₂ alone when all share family and N)."""
     families = {p[0] for p in panels}
     sizes = {p[1] for p in panels}
@@ -179,7 +187,7 @@ def _where(cells: Sequence[Comparison], names: Mapping, every: bool = True) -> s
 
 
 
-def _scope(lead: Sequence[Comparison], cells: Sequence[Comparison], names: Mapping) -> str:
+def scope_text(lead: Sequence[Comparison], cells: Sequence[Comparison], names: Mapping) -> str:
     """Where the headline holds; "in every panel but one" when the exceptions share one panel of three or more."""
     mine = {id(c) for c in lead}
     rest = [c for c in cells if id(c) not in mine]
@@ -215,7 +223,7 @@ def _n_phrase(cells: Sequence[Comparison]) -> str:
 _INFO_WORDS = {"delayed": "delayed", "instantaneous": "instantaneous", "none": "no communication"}
 
 
-def _models(c: Comparison, first: str | None = None) -> str:
+def models_text(c: Comparison, first: str | None = None) -> str:
     """The information models: "(both delayed)", or the marker of a cross-model claim, the models in the order in
     which the sentence names the designs (``first`` named first; by default a, then b)."""
     ia, ib = (_INFO_WORDS.get(x, x) for x in (c.info_a, c.info_b))
@@ -253,16 +261,16 @@ def _beats_sentence(lead, cells, names, side) -> str:
     a, b = c0.a, c0.b
     winner, loser = (a, b) if side < 0 else (b, a)
     beaten_by_bound = b == BOUND_LABEL and side > 0
-    verdict = f"{a} is beaten by the {b}" if beaten_by_bound else f"{_the(winner)} beats {_the(loser)}"
+    verdict = f"{a} is beaten by the {b}" if beaten_by_bound else f"{with_article(winner)} beats {with_article(loser)}"
     margins = [side * c.paired.median for c in lead]  # loser − winner: positive
     # The information models in the order the verdict names the designs.
-    models = _models(c0, a if beaten_by_bound else winner)
-    text = (f"**{verdict}** {models} {_scope(lead, cells, names)}: {_short(loser, winner)} costs "
-            f"{_range(margins)} more")
+    models = models_text(c0, a if beaten_by_bound else winner)
+    text = (f"**{verdict}** {models} {scope_text(lead, cells, names)}: {short_label(loser, winner)} costs "
+            f"{range_text(margins)} more")
     weak = _weakest(lead)
     low, high = sorted(side * v for v in (weak.paired.low, weak.paired.high))
-    interval = f"[{_fmt(low)}, {_fmt(high)}]"
-    where = f"weakest {_fmt(side * weak.paired.median)} {interval}, {_loc(weak, names)}" if len(lead) > 1 \
+    interval = f"[{number_text(low)}, {number_text(high)}]"
+    where = f"weakest {number_text(side * weak.paired.median)} {interval}, {_loc(weak, names)}" if len(lead) > 1 \
         else f"95 % interval {interval}"
     return text + f" ({where}; {_n_phrase(lead)}; {_holm(lead, '≤')})."
 
@@ -271,21 +279,21 @@ def _direction_sentence(lead, cells, names, side, k) -> str:
     """"**A costs more than B on 10 of 10 instances** (…) at …, +x to +y; not significant after Holm's …"."""
     c0 = lead[0]
     word = "less" if side < 0 else "more"
-    verdict = f"{c0.a} costs {word} than {_the(c0.b)} {_wins(lead, side)}"
+    verdict = f"{c0.a} costs {word} than {with_article(c0.b)} {_wins(lead, side)}"
     medians = [c.paired.median for c in lead]
-    return (f"**{verdict}** {_models(c0)} {_scope(lead, cells, names)}, {_range(medians)}; {_NOT_SIGNIFICANT} "
+    return (f"**{verdict}** {models_text(c0)} {scope_text(lead, cells, names)}, {range_text(medians)}; {_NOT_SIGNIFICANT} "
             f"over K = {_plural(k, 'comparison')} ({_holm(lead, '≥')}).")
 
 
 def _difference(c0: Comparison) -> str:
     """"GRNN-Sparse − SLS bound": the paired difference's two sides, short."""
-    return f"{_short(c0.a, c0.b)} − {_short(c0.b, c0.a).removeprefix('the ')}"
+    return f"{short_label(c0.a, c0.b)} − {short_label(c0.b, c0.a).removeprefix('the ')}"
 
 
 def _unclear_sentence(lead, cells, names) -> str:
     c0 = lead[0]
-    return (f"**No clear difference between {c0.a} and {_the(c0.b)}** {_models(c0)} {_scope(lead, cells, names)}: "
-            f"median {_difference(c0)} {_range([c.paired.median for c in lead])} ({_n_phrase(lead)}).")
+    return (f"**No clear difference between {c0.a} and {with_article(c0.b)}** {models_text(c0)} {scope_text(lead, cells, names)}: "
+            f"median {_difference(c0)} {range_text([c.paired.median for c in lead])} ({_n_phrase(lead)}).")
 
 
 def _equal_sentence(lead, cells, names) -> str:
@@ -294,8 +302,8 @@ def _equal_sentence(lead, cells, names) -> str:
     Never a count of wins: a difference below the margin is no win.
     """
     c0 = lead[0]
-    return (f"**{c0.a} and {_the(c0.b)} are {EQUAL_WORDS}** {_models(c0)} {_scope(lead, cells, names)}: "
-            f"median {_difference(c0)} {_range([c.paired.median for c in lead])} ({_n_phrase(lead)}).")
+    return (f"**{c0.a} and {with_article(c0.b)} are {EQUAL_WORDS}** {models_text(c0)} {scope_text(lead, cells, names)}: "
+            f"median {_difference(c0)} {range_text([c.paired.median for c in lead])} ({_n_phrase(lead)}).")
 
 
 def _digits(x: float, y: float) -> tuple[str, str]:
@@ -312,16 +320,16 @@ def _mixed_clause(cells: Sequence[Comparison], names: Mapping, *, where: bool) -
     "A costs less on 27 of 30 instances (median paired difference A − B −0.0014), yet B has the lower median
     cost (1.0889 against A's 1.0896)"."""
     c0 = cells[0]
-    side = _side(c0)
+    side = side_of(c0)
     typical, other = (c0.a, c0.b) if side < 0 else (c0.b, c0.a)
-    t_short, o_short = _short(typical, other), _short(other, typical)
+    t_short, o_short = short_label(typical, other), short_label(other, typical)
     drawn = []
     for c in cells:
         mine, theirs = (c.drawn_a, c.drawn_b) if typical == c.a else (c.drawn_b, c.drawn_a)
         t_text, o_text = _digits(mine, theirs)
         drawn.append(f"{o_text} against {t_text}" + (f" on {_loc(c, names)}" if where and len(cells) > 1 else ""))
     return (f"{t_short} costs less {_wins(cells, side)} (median paired difference {_difference(c0)} "
-            f"{_range([c.paired.median for c in cells])}; {_holm(cells, '≤')}), yet {o_short} has the lower median "
+            f"{range_text([c.paired.median for c in cells])}; {_holm(cells, '≤')}), yet {o_short} has the lower median "
             f"cost ({'; '.join(drawn)})")
 
 
@@ -329,7 +337,7 @@ def _mixed_sentence(lead, cells, names) -> str:
     """"**Mixed between A and B** (…) at …: the typical instance and the median costs disagree: A costs less on
     27 of 30 instances (…), yet B has the lower median cost (…)."."""
     c0 = lead[0]
-    return (f"**Mixed between {c0.a} and {_the(c0.b)}** {_models(c0)} {_scope(lead, cells, names)}: the typical "
+    return (f"**Mixed between {c0.a} and {with_article(c0.b)}** {models_text(c0)} {scope_text(lead, cells, names)}: the typical "
             f"instance and the median costs disagree: {_mixed_clause(lead, names, where=True)}.")
 
 
@@ -350,9 +358,9 @@ def _counts(cells: Sequence[Comparison], subject: str, side: int) -> str:
 
 def _few_sentence(lead, names) -> str:
     c0 = lead[0]
-    side = 1 if sum(_side(c) for c in lead) >= 0 else -1
-    return (f"**Too few instances to compare {c0.a} and {_the(c0.b)}** {_models(c0)} {_where(lead, names)}: "
-            f"{_counts(lead, _short(c0.a, c0.b), side)}, with no 95 % interval.")
+    side = 1 if sum(side_of(c) for c in lead) >= 0 else -1
+    return (f"**Too few instances to compare {c0.a} and {with_article(c0.b)}** {models_text(c0)} {_where(lead, names)}: "
+            f"{_counts(lead, short_label(c0.a, c0.b), side)}, with no 95 % interval.")
 
 
 def _rest_sentences(rest, names, level: str, side: int) -> list[str]:
@@ -363,16 +371,16 @@ def _rest_sentences(rest, names, level: str, side: int) -> list[str]:
     out = []
     beaten = [c for c in rest if _level(c) == _BEATS]
     if beaten:  # the opposite of the headline, significant: a claim of its own
-        flip = _side(beaten[0])
+        flip = side_of(beaten[0])
         winner, loser = (c0.a, c0.b) if flip < 0 else (c0.b, c0.a)
-        out.append(f"But **{_the(winner)} beats {_the(loser)}** {_where(beaten, names, False)} "
-                   f"({_range([flip * c.paired.median for c in beaten])}; {_holm(beaten, '≤')}).")
+        out.append(f"But **{with_article(winner)} beats {with_article(loser)}** {_where(beaten, names, False)} "
+                   f"({range_text([flip * c.paired.median for c in beaten])}; {_holm(beaten, '≤')}).")
     for same, what in ((True, "Same direction"), (False, "Opposite direction")):
-        cells = [c for c in rest if _level(c) == _DIRECTION and (_side(c) == side) == same]
+        cells = [c for c in rest if _level(c) == _DIRECTION and (side_of(c) == side) == same]
         if cells:
             out.append(f"{what}, {_NOT_SIGNIFICANT}, {_where(cells, names, False)} ({_holm(cells, '≥')}).")
     for typical in (-1, 1):  # the typical instance favours a, then b
-        mixed = [c for c in rest if _level(c) == _MIXED and _side(c) == typical]
+        mixed = [c for c in rest if _level(c) == _MIXED and side_of(c) == typical]
         if mixed:
             out.append(f"Mixed {_where(mixed, names, False)}: {_mixed_clause(mixed, names, where=True)}.")
     equal = [c for c in rest if _level(c) == _EQUAL]
@@ -397,9 +405,9 @@ def _pair_bullet(cells: Sequence[Comparison], names: Mapping, k: int, complete_p
     pool = by_level[level]
     side = 0
     if level in (_BEATS, _DIRECTION, _MIXED):
-        votes = [_side(c) for c in pool]
+        votes = [side_of(c) for c in pool]
         side = -1 if votes.count(-1) > votes.count(1) else 1
-        lead = [c for c in pool if _side(c) == side]
+        lead = [c for c in pool if side_of(c) == side]
         head = {_BEATS: lambda: _beats_sentence(lead, cells, names, side),
                 _DIRECTION: lambda: _direction_sentence(lead, cells, names, side, k),
                 _MIXED: lambda: _mixed_sentence(lead, cells, names)}[level]()
@@ -529,7 +537,7 @@ def repaired_instances(records, comparisons: Sequence[Comparison]) -> int:
     cell, an instance where both sides have a design within the budget and a side's best
     cost differs (or is missing) once unresolved designs are dropped.
     """
-    from .findings import _arm_labels, is_unresolved
+    from .findings import arm_labels, is_unresolved
     from .records import Records, as_records
     from .statistics import best_within, instances_by_panel
 
@@ -537,7 +545,7 @@ def repaired_instances(records, comparisons: Sequence[Comparison]) -> int:
     cells = [c for c in comparisons if c.excluded]
     if not cells:
         return 0
-    labels = _arm_labels(records)
+    labels = arm_labels(records)
     panels = instances_by_panel(records)
     full: dict[tuple, list] = {}
     kept: dict[tuple, list] = {}
@@ -596,7 +604,7 @@ def findings_markdown(comparisons: Sequence[Comparison], *, excluded_total: int 
     """
     if not comparisons:
         return []
-    names = _panel_names(list(dict.fromkeys(c.panel for c in comparisons)))
+    names = panel_names(list(dict.fromkeys(c.panel for c in comparisons)))
     k = len(comparisons)
     pairs: dict[tuple, list] = {}
     for c in comparisons:

@@ -100,7 +100,7 @@ import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
 from .cost_links import aggregate, axis_costs
-from .figures import BOUNDARY_LABEL, OFF_SCALE, FLOOR, _y_limits, excess, panel_heading, shared_y
+from .figures import BOUNDARY_LABEL, OFF_SCALE, FLOOR, excess, panel_heading, shared_y, y_limits
 from .records import as_records
 from .statistics import budget_fronts
 from .styles import INFO_MODELS, INFO_ORDER
@@ -472,7 +472,7 @@ def cost_links_figure(records, styles: Mapping, *, boundaries: Mapping | None = 
     order = _label_order(usable.by_label, styles)
     varying = _varying_params(records)
 
-    limits = _y_limits(axis_costs(points, fronts)) if shared_y(panels) else None
+    limits = y_limits(axis_costs(points, fronts)) if shared_y(panels) else None
     fig, cells, rows, cols = _new_figure(panels, titles)
     axes, shown_legend = {}, set()
     by_panel_label = usable.by_panel_label
@@ -480,7 +480,7 @@ def cost_links_figure(records, styles: Mapping, *, boundaries: Mapping | None = 
     for panel in panels:
         mine_points = [p for p in points if p.panel == panel]
         mine_fronts = {f.label: f for f in fronts if f.panel == panel}
-        bottom, top = limits or _y_limits(axis_costs(mine_points, mine_fronts.values()))
+        bottom, top = limits or y_limits(axis_costs(mine_points, mine_fronts.values()))
         right = max((r.links for r in usable if r.instance.panel == panel), default=1)
         ax = axes[panel] = _Axes(panel, per_node, bottom, top * 1.3, right)
         row, col = cells[panel]
@@ -577,7 +577,7 @@ def budget_fronts_figure(fronts, styles: Mapping, *, boundaries: Mapping | None 
         finite = [c for f in group for c in f.cost[1] if np.isfinite(c)]
         return [c for c in finite if c <= OFF_SCALE]
 
-    limits = _y_limits(shown(fronts)) if shared_y(panels) else None
+    limits = y_limits(shown(fronts)) if shared_y(panels) else None
     titles, notes = {}, {}
     for panel in panels:
         mine = [f for f in fronts if f.panel == panel]
@@ -590,7 +590,7 @@ def budget_fronts_figure(fronts, styles: Mapping, *, boundaries: Mapping | None 
     any_boundary = False
     for panel in panels:
         mine = {f.label: f for f in fronts if f.panel == panel}
-        bottom, top = limits or _y_limits(shown(mine.values()))
+        bottom, top = limits or y_limits(shown(mine.values()))
         ax = axes[panel] = _Axes(panel, per_node, bottom, top * 1.25, max(float(f.budgets[-1]) for f in mine.values()))
         row, col = cells[panel]
         lowest = {label: float(np.min(f.cost[1])) for label, f in mine.items()}

@@ -82,9 +82,9 @@ def _serve(conn, parent_pid: int) -> None:
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, _HELD)  # held while it was started
     _die_with_parent(parent_pid)
-    from .execution import WorkerSetupError, _limit_threads, execute_task_sendable
+    from .execution import WorkerSetupError, execute_task_sendable, limit_threads
 
-    _limit_threads()
+    limit_threads()
     while True:
         try:
             task_id, runs, plugins = conn.recv()

@@ -24,16 +24,26 @@ import numpy as np  # noqa: E402
 
 from codesign.status import OPTIMAL  # noqa: E402
 
+from .answer import answer_lines  # noqa: E402
 from .cost_links import Point, aggregate, pareto_front, plot_cost_vs_links, quartiles  # noqa: E402
 from .figures import LINESTYLES, OFF_SCALE, drawn_styles, plot_budget_fronts  # noqa: E402
 from .meta import StoreMeta  # noqa: E402
-from .records import Records, as_records  # noqa: E402
-from .answer import answer_lines  # noqa: E402
 from .pattern_gaps import pattern_gap_section  # noqa: E402
+from .records import Records, as_records  # noqa: E402
 from .report_sections import delayed_section, experiments_with, learning_sections  # noqa: E402
-from .report_tables import (_asked_pairs, _budget_tables, _environment_lines, _fingerprint_lines, _paired_lines,  # noqa: E402
-                            _pareto_tables, _precision_text, _summary_tables, _systems_table, _uncertain_text,
-                            software_versions)
+from .report_tables import (  # noqa: E402
+    asked_pairs,
+    budget_tables,
+    environment_lines,
+    fingerprint_lines,
+    paired_lines,
+    pareto_tables,
+    precision_text,
+    software_versions,
+    summary_tables,
+    systems_table,
+    uncertain_text,
+)
 from .statistics import best_tables, budget_fronts, panel_budgets, panel_title  # noqa: E402
 from .styles import label_styles  # noqa: E402
 
@@ -200,6 +210,7 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     dict
         Name -> path of every file written.
     """
+    from .decomposition import decomposition_section
     from .findings import select_comparisons, unresolved
     from .findings_text import findings_markdown
     from .folder import write_folder
@@ -219,7 +230,7 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     files, drawn = {}, {}
     save = _save(out, files, drawn)
 
-    comparisons = select_comparisons(records, pairs=_asked_pairs(records, meta))
+    comparisons = select_comparisons(records, pairs=asked_pairs(records, meta))
     if comparisons:
         fig, _ = plot_forest(comparisons, styles)
         save(fig, "forest")
@@ -236,6 +247,7 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     lines += answer_lines(records, comparisons, meta=meta, members=members)
     if comparisons:
         lines += findings_markdown(comparisons, excluded_total=len(unresolved(records)), records=records)
+    lines += decomposition_section(records, save)
     lines += [
         "## What was compared", "",
         f"{_count(len(runs), 'run')} on {_count(len(records.instances), 'instance')} ({_panels_text(instances)}), "
@@ -245,7 +257,7 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
         "instance by instance. How it was computed, and how to rebuild it, is at the end.",
         "",
     ]
-    lines += _systems_table(records)
+    lines += systems_table(records)
     if fronts:
         lines += [
             "## Best cost within a link budget", "", "![budget fronts](budget_fronts.png)", "",
@@ -258,7 +270,7 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
             "Line styles give the information model; designs closer to LQR than the axis reaches (LQR itself "
             "among them) sit on its bottom edge.", "",
         ]
-        lines += _budget_tables(records)
+        lines += budget_tables(records)
     lines += _missing_lines(records, points, boundaries)
     lines += pattern_gap_section(records)
     lines += delayed_section(records, save, styles, boundaries)
@@ -275,12 +287,12 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
         + _hidden_settings_text(points) + f". Medians above {OFF_SCALE:g} × LQR are triangles on the top edge "
         "with their value.", "",
     ]
-    lines += _paired_lines(records, meta)
+    lines += paired_lines(records, meta)
     lines += ["## Medians by method", ""]
-    lines += _summary_tables(points, records)
+    lines += summary_tables(points, records)
     lines += ["## Pareto fronts", "", "Settings no other setting of the same method beats on both links and median "
               "cost, among the settings whose summary point some design reaches (as drawn).", ""]
-    lines += _pareto_tables(points)
+    lines += pareto_tables(points)
     if boundaries:
         lines += ["The dotted vertical line in the figures (\"QI boundary\" in their legends) is the median "
                   "number of off-diagonal plant-graph links: below it no communication graph relaying one "
@@ -350,15 +362,15 @@ def _provenance_lines(records: Records, meta: StoreMeta, commands, superseded: i
                 "(`runs.csv`, `curves.csv`, `report.json`) with " if run_commands
                 else "Rebuild this report from its folder alone with ") + f"`{rebuild}`."
         lines += [how, ""]
-    lines += _environment_lines(meta)
+    lines += environment_lines(meta)
     lines += [
         "Exact closed-form costs for linear controllers; for learned ones an estimate on the validation set "
-        "(the same initial states for every method on an instance)" + _precision_text(records) + "."
-        + _uncertain_text(records)
+        "(the same initial states for every method on an instance)" + precision_text(records) + "."
+        + uncertain_text(records)
         + (f" The store also holds {superseded} runs made by code that has changed since; they are not "
            "shown (see Code fingerprints)." if superseded else ""), "",
     ]
-    lines += _fingerprint_lines(records, meta)
+    lines += fingerprint_lines(records, meta)
     lines += ["## Runs by status", "", "| status | designs |", "|---|---:|"]
     lines += [f"| {status} | {count} |" for status, count in sorted(statuses.items())]
     failures = records.filter(lambda r: r.status != OPTIMAL)

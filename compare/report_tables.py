@@ -18,7 +18,13 @@ from .cost_links import Point, pareto_front
 from .findings import UNCERTAIN_RSE, unresolved
 from .meta import StoreMeta
 from .records import OK_STATUSES, Records
-from .statistics import best_tables, front_quantiles, paired_comparisons, panel_budgets, panel_title
+from .statistics import (
+    best_tables,
+    front_quantiles,
+    paired_comparisons,
+    panel_budgets,
+    panel_title,
+)
 
 _PACKAGES = ("grnn-codesign", "numpy", "scipy", "cvxpy", "clarabel", "scs", "control", "torch", "numba", "networkx",
              "matplotlib", "plotly")
@@ -84,7 +90,7 @@ def _params_text(params: Mapping) -> str:
     return ", ".join(f"{k}={text(v)}" for k, v in sorted(params.items())) or "—"
 
 
-def _summary_tables(points: list[Point], records: Records | None = None) -> list[str]:
+def summary_tables(points: list[Point], records: Records | None = None) -> list[str]:
     """Medians by setting; a setting with unresolved simulated costs says how many (they enter no finding)."""
     flagged = Counter((r.instance.panel, r.label, r.params_key) for r in unresolved(records)) if records else {}
     lines = []
@@ -111,7 +117,7 @@ def _summary_tables(points: list[Point], records: Records | None = None) -> list
     return lines
 
 
-def _systems_table(records: Records) -> list[str]:
+def systems_table(records: Records) -> list[str]:
     """The systems compared, one row per panel, from the facts the runner stored (none for older stores)."""
     def spread(values, fmt) -> str:
         values = sorted(v for v in values if v is not None)
@@ -138,7 +144,7 @@ def _systems_table(records: Records) -> list[str]:
             "[lowest, highest]. A node without an actuator keeps its states and its links.", ""]
 
 
-def _budget_tables(records: Records) -> list[str]:
+def budget_tables(records: Records) -> list[str]:
     """The budget fronts at a few budgets per panel (:func:`panel_budgets`), with the instances where some design fits."""
     lines = []
     for panel, in_panel in sorted(records.by_panel.items()):
@@ -183,7 +189,7 @@ def _paired_table(comparisons: dict, title: str, info: Mapping) -> list[str]:
     return lines
 
 
-def _asked_pairs(records: Records, meta: StoreMeta) -> list[tuple[str, str]]:
+def asked_pairs(records: Records, meta: StoreMeta) -> list[tuple[str, str]]:
     """The (first, second) label pairs the specs ask for (``pairs`` in a spec; a method name stands for each of
     its labels)."""
     by_method: dict[str, list[str]] = {}
@@ -200,7 +206,7 @@ def _asked_pairs(records: Records, meta: StoreMeta) -> list[tuple[str, str]]:
     return asked
 
 
-def _paired_lines(records: Records, meta: StoreMeta) -> list[str]:
+def paired_lines(records: Records, meta: StoreMeta) -> list[str]:
     """GRNN-Sparse against every other method, and the pairs the specs ask for, per budget."""
     info = {r.label: r.info_model for r in records}
     lines = []
@@ -209,7 +215,7 @@ def _paired_lines(records: Records, meta: StoreMeta) -> list[str]:
                       and r.params.get("activation", "tanh") == "tanh"), None)
     if reference:
         lines += _paired_table(paired_comparisons(records, reference), f"{reference} against every method", info)
-    asked = [pair for pair in _asked_pairs(records, meta) if pair[0] != reference]
+    asked = [pair for pair in asked_pairs(records, meta) if pair[0] != reference]
     for first, second in asked:
         lines += _paired_table(paired_comparisons(records, first, others={second}), f"{first} against {second}", info)
     if not lines:
@@ -223,7 +229,7 @@ def _paired_lines(records: Records, meta: StoreMeta) -> list[str]:
             "contains 0, the instances do not say which method is better.", ""] + lines
 
 
-def _precision_text(records: Records) -> str:
+def precision_text(records: Records) -> str:
     """The relative standard errors of the simulated costs, as measured."""
     simulated = records.filter(lambda r: r.cost_kind == "simulated" and r.status in OK_STATUSES)
     rel = [r.cost_stderr / r.cost for r in simulated if r.ok and r.cost > 0]
@@ -246,7 +252,7 @@ def _precision_text(records: Records) -> str:
     return text + ")"
 
 
-def _uncertain_text(records: Records) -> str:
+def uncertain_text(records: Records) -> str:
     """A warning naming the panels whose simulated costs stay imprecise after refinement (empty if none)."""
     uncertain = unresolved(records)
     if not len(uncertain):
@@ -264,7 +270,7 @@ def _uncertain_text(records: Records) -> str:
             "\"Costs dominated by rare divergent draws\"); the figures and tables still show them.")
 
 
-def _environment_lines(meta: StoreMeta) -> list[str]:
+def environment_lines(meta: StoreMeta) -> list[str]:
     """Where each experiment's runs were computed (recorded by the runner when it computed runs)."""
     rows = sorted(meta.environments.items())
     if not rows:
@@ -280,7 +286,8 @@ def _environment_lines(meta: StoreMeta) -> list[str]:
                     "always differ.", ""]
 
 
-def _pareto_tables(points: list[Point]) -> list[str]:
+def pareto_tables(points: list[Point]) -> list[str]:
+    """Each method's Pareto front (links, median cost), one table per panel; "—" where it has no usable design."""
     lines = []
     for panel in sorted({p.panel for p in points}):
         lines += [f"### {panel_title(panel)}", "", "| method | front: (links, median cost) |", "|---|---|"]
@@ -292,7 +299,7 @@ def _pareto_tables(points: list[Point]) -> list[str]:
     return lines
 
 
-def _fingerprint_lines(records: Records, meta: StoreMeta) -> list[str]:
+def fingerprint_lines(records: Records, meta: StoreMeta) -> list[str]:
     """Which code produced the runs: one row per (method, fingerprint)."""
     runs = defaultdict(set)
     for r in records:
@@ -308,5 +315,4 @@ def _fingerprint_lines(records: Records, meta: StoreMeta) -> list[str]:
         text = ", ".join(f"{k} {v}" for k, v in sorted(versions.items())) or "—"
         lines.append(f"| {method} | `{fp}` | {len(keys)} | {text} |")
     return lines + [""]
-
 

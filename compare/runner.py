@@ -25,17 +25,17 @@ from codesign.status import OPTIMAL
 
 from .environment import environment
 from .execution import (  # noqa: F401 - re-exported: the runner's public names
-    _THREAD_VARS,
+    THREAD_VARS,
     ExecutorError,
     RunResult,
     WorkerSetupError,
-    _limit_threads,
     build_instance,
     execute_run,
     execute_task,
     execute_task_sendable,
     failed_run,
     instance_facts,
+    limit_threads,
     reissue_warnings,
     sendable_results,
 )
@@ -84,13 +84,13 @@ def plan_tasks(runs: list[Run]) -> list[list[Run]]:
 
 
 def make_executor(workers: int) -> Executor:
-    """A process pool of ``workers`` single-threaded workers (spawned, not forked; see :func:`_limit_threads`)."""
+    """A process pool of ``workers`` single-threaded workers (spawned, not forked; see :func:`limit_threads`)."""
     # The pool starts its processes when work is submitted, so the limits are set in each
     # worker by the initializer rather than through this process's environment.
     return ProcessPoolExecutor(
         max_workers=workers,
         mp_context=multiprocessing.get_context("spawn"),
-        initializer=_limit_threads,
+        initializer=limit_threads,
     )
 
 
@@ -126,7 +126,7 @@ def open_executor(address: str, workers: int):
             except (OSError, TimeoutError) as exc:
                 raise ExecutorError(f"cannot reach the dask scheduler at {target}: {exc}") from None
         try:
-            client.run(_limit_threads)  # dask's nanny covers BLAS and OpenMP, not rayon
+            client.run(limit_threads)  # dask's nanny covers BLAS and OpenMP, not rayon
             yield client.get_executor(pure=False)
         finally:
             client.close()

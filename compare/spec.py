@@ -61,7 +61,9 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+from .families import UnknownFamilyError, get_family
 from .fingerprint import fingerprint
+from .parsing import SpecError, check_keys, typed
 from .plugins import PluginError, load_plugins, parse_plugin
 from .registry import UnknownMethodError, get_method
 
@@ -96,10 +98,6 @@ DENSE_MATRICES = 48
 #: each instance once in the main process (about 3-4 ms each at small sizes) and stores about 1 KB
 #: of facts for it, so 50,000 take about 3 minutes and 50 MB before the first run.
 MAX_INSTANCES = 50_000
-
-
-class SpecError(ValueError):
-    """A malformed experiment spec; the message names the offending key."""
 
 
 @dataclass(frozen=True)
@@ -180,8 +178,6 @@ class Run:
 
         Keys are sorted before hashing, so the order of keys in a spec never changes a key.
         """
-        from .families import get_family
-
         payload = {
             "instance": get_family(self.instance["family"]).identity(self.instance),
             "method": self.method,
@@ -279,13 +275,13 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(f"spec is not valid TOML: {exc}") from None
-    _check_keys("spec", data, {"name", "description", "instances", "methods", "evaluation", "plugins", "report",
-                               "timeout", "max_instances"})
+    check_keys("spec", data, {"name", "description", "instances", "methods", "evaluation", "plugins", "report",
+                              "timeout", "max_instances"})
     refs = [("--plugin", ref) for ref in plugins]
     raw_plugins = data.get("plugins", [])
     if not isinstance(raw_plugins, list):
         raise SpecError(f"plugins: expected a list of module names or .py files, got {raw_plugins!r}")
-    refs += [(f"plugins[{i}]", _typed(f"plugins[{i}]", ref, str)) for i, ref in enumerate(raw_plugins)]
+    refs += [(f"plugins[{i}]", typed(f"plugins[{i}]", ref, str)) for i, ref in enumerate(raw_plugins)]
     loaded = []
     for where, ref in refs:
         try:
@@ -294,24 +290,22 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
         except PluginError as exc:
             raise SpecError(f"{where}: {exc}") from None
         loaded.append(plugin)
-    report = _typed("report", data.get("report", {}), dict)
+    report = typed("report", data.get("report", {}), dict)
     sections, pairs = _parse_report(report)
     ladder = parse_ladder(report.get("ladder"))
-    name = _check_name(_typed("name", data.get("name", default_name), str), given="name" in data)
-    description = _typed("description", data.get("description", ""), str)
+    name = _check_name(typed("name", data.get("name", default_name), str), given="name" in data)
+    description = typed("description", data.get("description", ""), str)
     if "instances" not in data:
         raise SpecError("spec: missing [instances] table")
-    limit = _typed("max_instances", data.get("max_instances", MAX_INSTANCES), int)
+    limit = typed("max_instances", data.get("max_instances", MAX_INSTANCES), int)
     if limit < 1:
         raise SpecError(f"max_instances: must be >= 1, got {limit}")
-    instances = _parse_instances(_typed("instances", data["instances"], (dict, list)), base,
+    instances = _parse_instances(typed("instances", data["instances"], (dict, list)), base,
                                  (limit, "max_instances" in data))
-    evaluation = _parse_evaluation(_typed("evaluation", data.get("evaluation", {}), dict))
-    raw_methods = _typed("methods", data.get("methods", []), list)
+    evaluation = _parse_evaluation(typed("evaluation", data.get("evaluation", {}), dict))
+    raw_methods = typed("methods", data.get("methods", []), list)
     if not raw_methods:
         raise SpecError("methods: the spec needs at least one [[methods]] entry")
-    from .families import get_family
-
     fields = {"family"}.union(*(get_family(name).fields for name in instances.families))
     timeout = _parse_timeout("timeout", data.get("timeout"))
     methods = tuple(_parse_method(i, entry, base, loaded, fields, timeout) for i, entry in enumerate(raw_methods))
@@ -392,7 +386,7 @@ def parse_ladder(table) -> dict | None:
         return None
     if not isinstance(table, dict):
         raise SpecError(f"report.ladder: expected a table (budgets, methods, near, claim), got {table!r}")
-    _check_keys("report.ladder", table, {"budgets", "methods", "near", "claim"})
+    check_keys("report.ladder", table, {"budgets", "methods", "near", "claim"})
     budgets = table.get("budgets", list(LADDER_BUDGETS))
     if not (isinstance(budgets, list) and budgets and all(isinstance(b, int) and not isinstance(b, bool) and b >= 0
                                                            for b in budgets)):
@@ -405,12 +399,12 @@ def parse_ladder(table) -> dict | None:
     near = table.get("near", LADDER_NEAR)
     if isinstance(near, bool) or not isinstance(near, (int, float)) or not 0 < near < math.inf:
         raise SpecError(f"report.ladder.near: expected a percentage > 0, got {near!r}")
-    claim = _typed("report.ladder.claim", table.get("claim", ""), str)
+    claim = typed("report.ladder.claim", table.get("claim", ""), str)
     return {"budgets": list(budgets), "methods": list(methods), "near": float(near), "claim": claim}
 
 
 def _parse_report(table: dict) -> tuple[tuple, tuple]:
-    _check_keys("report", table, {"sections", "pairs", "ladder"})
+    check_keys("report", table, {"sections", "pairs", "ladder"})
     sections = table.get("sections", [])
     if not isinstance(sections, list):
         raise SpecError(f"report.sections: expected a list, got {sections!r}")
@@ -426,49 +420,19 @@ def _parse_report(table: dict) -> tuple[tuple, tuple]:
     return tuple(sections), tuple(tuple(pair) for pair in pairs)
 
 
-def _check_keys(where: str, table: dict, allowed: set) -> None:
-    for key in table:
-        if key not in allowed:
-            raise SpecError(f"{where}.{key}: unknown key (allowed: {', '.join(sorted(allowed))})")
-
-
-def _typed(where: str, value, kind):
-    ok = isinstance(value, kind) and not (kind in (int, float) and isinstance(value, bool))
-    if kind is float and isinstance(value, int) and not isinstance(value, bool):
-        return float(value)
-    if kind is float and ok and not math.isfinite(value):
-        raise SpecError(f"{where}: expected a finite number, got {value!r}")
-    if not ok:
-        kind_name = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
-        raise SpecError(f"{where}: expected {kind_name}, got {type(value).__name__} {value!r}")
-    return value
-
-
-def _list_of(where: str, value, kind, *, positive: bool = True) -> tuple:
-    items = value if isinstance(value, list) else [value]
-    if not items:
-        raise SpecError(f"{where}: must not be empty")
-    out = tuple(_typed(f"{where}[{i}]" if isinstance(value, list) else where, v, kind) for i, v in enumerate(items))
-    if positive and any(v <= 0 for v in out):
-        raise SpecError(f"{where}: values must be positive, got {list(out)}")
-    return out
-
-
 def _parse_instances(table, base, limit: tuple = (MAX_INSTANCES, False)) -> InstanceSpec:
     """One ``[instances]`` table, or a list of them (``[[instances]]``: several families).
 
     ``limit`` is the most instances allowed and whether the spec set it (:func:`_check_count`).
     """
-    from .families import UnknownFamilyError, get_family
-
     tables = [table] if isinstance(table, dict) else table
     if not tables:
         raise SpecError("instances: the list of [[instances]] tables is empty")
     names, specs = [], []
     for i, entry in enumerate(tables):
         where = "instances" if isinstance(table, dict) else f"instances[{i}]"
-        entry = _typed(where, entry, dict)
-        name = _typed(f"{where}.family", entry.get("family", "paper"), str)
+        entry = typed(where, entry, dict)
+        name = typed(f"{where}.family", entry.get("family", "paper"), str)
         try:
             family = get_family(name)
         except UnknownFamilyError as exc:
@@ -542,9 +506,9 @@ def _check_memory(where: str, family, specs, memory: int | None = None) -> None:
 
 
 def _parse_evaluation(table: dict) -> EvaluationSpec:
-    _check_keys("evaluation", table, {"validation_size", "noise_std"})
-    size = _typed("evaluation.validation_size", table.get("validation_size", EvaluationSpec.validation_size), int)
-    noise = _typed("evaluation.noise_std", table.get("noise_std", 0.0), float)
+    check_keys("evaluation", table, {"validation_size", "noise_std"})
+    size = typed("evaluation.validation_size", table.get("validation_size", EvaluationSpec.validation_size), int)
+    noise = typed("evaluation.noise_std", table.get("noise_std", 0.0), float)
     if size < 2:
         raise SpecError(f"evaluation.validation_size: must be >= 2, got {size}")
     if noise < 0:
@@ -563,12 +527,12 @@ def _parse_timeout(where: str, value) -> float | None:
 
 def _parse_method(index: int, entry, base, plugins: list, fields=frozenset(), timeout=None) -> MethodSpec:
     where = f"methods[{index}]"
-    entry = _typed(where, entry, dict)
-    _check_keys(where, entry, {"method", "label", "params", "grid", "where", "timeout"})
+    entry = typed(where, entry, dict)
+    check_keys(where, entry, {"method", "label", "params", "grid", "where", "timeout"})
     timeout = _parse_timeout(f"{where}.timeout", entry["timeout"]) if "timeout" in entry else timeout
     if "method" not in entry:
         raise SpecError(f"{where}.method: missing (which registered method to run)")
-    name = _typed(f"{where}.method", entry["method"], str)
+    name = typed(f"{where}.method", entry["method"], str)
     if ":" in name:
         try:
             plugin = parse_plugin(name, base=base, function=True)
@@ -580,9 +544,9 @@ def _parse_method(index: int, entry, base, plugins: list, fields=frozenset(), ti
         method = get_method(name)
     except UnknownMethodError as exc:
         raise SpecError(f"{where}.method: {exc}") from None
-    label = _typed(f"{where}.label", entry.get("label", method.label), str)
-    params = _typed(f"{where}.params", entry.get("params", {}), dict)
-    grid = _typed(f"{where}.grid", entry.get("grid", {}), dict)
+    label = typed(f"{where}.label", entry.get("label", method.label), str)
+    params = typed(f"{where}.params", entry.get("params", {}), dict)
+    grid = typed(f"{where}.grid", entry.get("grid", {}), dict)
     for key, values in grid.items():
         if not isinstance(values, list) or not values:
             raise SpecError(f"{where}.grid.{key}: expected a non-empty list of values, got {values!r}")
@@ -595,7 +559,7 @@ def _parse_method(index: int, entry, base, plugins: list, fields=frozenset(), ti
                 method.check_params({key: value}, f"{where}.grid")
     except ValueError as exc:
         raise SpecError(str(exc)) from None
-    filters = _typed(f"{where}.where", entry.get("where", {}), dict)
+    filters = typed(f"{where}.where", entry.get("where", {}), dict)
     for key, values in filters.items():
         if key not in fields:
             raise SpecError(f"{where}.where.{key}: unknown instance field (the instances have: "

@@ -21,6 +21,7 @@ from codesign.status import OPTIMAL
 
 from .drawing import DRAWN_NODES_AT_MOST, InstanceDrawing, drawing_facts, node_colours  # noqa: F401
 from .records import DesignRecord, as_records
+from .styles import grnn_kinds
 
 __all__ = ["plot_topology_path", "topology_path_records", "topology_caption", "SPY_ABOVE", "node_order",
            "InstanceDrawing", "node_colours", "drawing_facts", "DRAWN_NODES_AT_MOST"]
@@ -211,7 +212,8 @@ def topology_path_records(records, *, method: str = "grnn_sparse", weight: str =
     Table 1 run at β = 1 with 750 training steps is not on the trade-off
     sweep's 150-step path). Picks a path on ``a_norm == prefer_a_norm``, as
     the paper's Fig. 4 does, when one has two or more weights; then the paper's
-    tanh GRNN over the linear ablation; then the most weights, then the lowest seed.
+    tanh GRNN over the linear ablation, and the paper's shared readout from a random draw
+    over a per-node readout or a warm start; then the most weights, then the lowest seed.
     """
     paths: dict[tuple, dict] = {}
     for r in as_records(records):
@@ -226,7 +228,8 @@ def topology_path_records(records, *, method: str = "grnn_sparse", weight: str =
         design = next(iter(path.values()))
         preferred = design.instance.a_norm == prefer_a_norm and len(path) >= 2
         linear = design.params.get("activation") == "identity"
-        return (not preferred, linear, -len(path), design.instance.spec.get("seed", 0), others)
+        other_kind = bool(grnn_kinds(design.method, design.params))  # a per-node readout or a warm start
+        return (not preferred, linear, other_kind, -len(path), design.instance.spec.get("seed", 0), others)
 
     _, path = min(paths.items(), key=rank)
     return [path[w] for w in sorted(path)]

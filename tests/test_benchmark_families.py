@@ -133,7 +133,7 @@ def test_bad_family_keys_are_named(table, message):
 
 
 SMALL = {"steps": 10, "ensemble": 1, "stability_steps": 0}
-EVERY_METHOD = f"""
+EVERY_METHOD = """
 [[methods]]
 method = "lqr"
 [[methods]]
@@ -142,33 +142,33 @@ method = "autonomous"
 method = "decentralized"
 [[methods]]
 method = "truncated_lqr"
-grid = {{ links = [[2, 6]] }}
+grid = { links = [[2, 6]] }
 [[methods]]
 method = "sparse_admm"
-grid = {{ gammas = [[1e-3, 1e-1]] }}
+grid = { gammas = [[1e-3, 1e-1]] }
 [[methods]]
 method = "sparse_sdp"
-grid = {{ gammas = [[1e-3, 1e-1]] }}
+grid = { gammas = [[1e-3, 1e-1]] }
 [[methods]]
 method = "sparse_delayed"
-grid = {{ gammas = [[1e-3, 1e-1]] }}
+grid = { gammas = [[1e-3, 1e-1]] }
 [[methods]]
 method = "sls"
 [[methods]]
 method = "grnn"
-params = {{ steps = 10, ensemble = 1, stability_steps = 0 }}
+params = { steps = 10, ensemble = 1, stability_steps = 0 }
 [[methods]]
 method = "grnn_dense"
-params = {{ steps = 10, ensemble = 1, stability_steps = 0 }}
+params = { steps = 10, ensemble = 1, stability_steps = 0 }
 [[methods]]
 method = "grnn_fixed"
-params = {{ steps = 10, ensemble = 1, stability_steps = 0 }}
+params = { steps = 10, ensemble = 1, stability_steps = 0 }
 [[methods]]
 method = "grnn_sparse"
-params = {{ steps = 10, ensemble = 1, stability_steps = 0, beta = 0.1 }}
+params = { steps = 10, ensemble = 1, stability_steps = 0, beta = 0.1 }
 [[methods]]
 method = "gcnn"
-params = {{ steps = 10, ensemble = 1, stability_steps = 0 }}
+params = { steps = 10, ensemble = 1, stability_steps = 0 }
 """
 
 

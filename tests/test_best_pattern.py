@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
+import compare.registry  # noqa: F401  (the built-ins: importing a family registers no method)
 from codesign import get_method, paper_instance
 from codesign.status import USABLE
 from compare.families.chain import chain_instance

@@ -8,25 +8,11 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from tiny_specs import tiny_spec  # tests/tiny_specs.py
 
 from compare.cli import main
 
-SPEC = """
-name = "tiny"
-description = "tiny test experiment"
-[instances]
-n = [8]
-a_norms = [0.995, 1.05]
-seeds = 2
-degree = 4
-horizon = 10
-[[methods]]
-method = "lqr"
-[[methods]]
-method = "autonomous"
-[[methods]]
-method = "decentralized"
-"""
+SPEC = tiny_spec(head='description = "tiny test experiment"\n')
 
 
 def _write(tmp_path, text=SPEC, name="tiny.toml"):

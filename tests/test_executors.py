@@ -1,23 +1,12 @@
 import sqlite3
 
 import pytest
+from tiny_specs import tiny_spec  # tests/tiny_specs.py
 
 from compare import Store, parse_spec, run_experiment
 from compare.runner import ExecutorError, open_executor
 
-SPEC = """
-name = "dask"
-[instances]
-n = [8]
-a_norms = [0.995, 1.05]
-seeds = 3
-degree = 4
-horizon = 10
-[[methods]]
-method = "lqr"
-[[methods]]
-method = "decentralized"
-"""
+SPEC = tiny_spec("dask", methods=("lqr", "decentralized"), seeds=3)
 
 
 def _dump(path):
@@ -57,9 +46,9 @@ def _thread_settings():
     import numpy as np
     from threadpoolctl import threadpool_info
 
-    from compare.runner import _THREAD_VARS
+    from compare.runner import THREAD_VARS
 
-    env = {var: os.environ.get(var) for var in _THREAD_VARS}
+    env = {var: os.environ.get(var) for var in THREAD_VARS}
 
     np.linalg.eigh(np.eye(300) + 1.0)  # BLAS in use, as in a run
     return env, {(pool["internal_api"], pool["num_threads"]) for pool in threadpool_info()}
@@ -71,9 +60,9 @@ def test_local_workers_are_single_threaded_for_every_thread_pool(monkeypatch):
     The BLAS pools are checked as loaded, not through the environment: numpy loads before the
     pool's initializer runs, and OpenBLAS ignores variables set after it started.
     """
-    from compare.runner import _THREAD_VARS, make_executor
+    from compare.runner import THREAD_VARS, make_executor
 
-    for var in _THREAD_VARS:  # as in a user's shell (conftest sets them for the test process)
+    for var in THREAD_VARS:  # as in a user's shell (conftest sets them for the test process)
         monkeypatch.delenv(var, raising=False)
     pool = make_executor(1)
     try:

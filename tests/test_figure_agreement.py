@@ -29,7 +29,7 @@ from compare.folder import read_folder  # noqa: E402
 from compare.meta import StoreMeta  # noqa: E402
 from compare.records import Records  # noqa: E402
 from compare.report import plant_links, report_records, write_report  # noqa: E402
-from compare.report_tables import _asked_pairs  # noqa: E402
+from compare.report_tables import asked_pairs  # noqa: E402
 from compare.statistics import budget_fronts  # noqa: E402
 from compare.styles import label_styles  # noqa: E402
 
@@ -42,7 +42,7 @@ FIGURES = {"fig-cost-vs-links": "cost_vs_links", "fig-budget-fronts": "budget_fr
 def _shipped(name: str):
     data = read_folder(REPORTS / name)
     records = report_records(data.records)
-    comparisons = select_comparisons(records, pairs=_asked_pairs(records, StoreMeta.of(data.meta)))
+    comparisons = select_comparisons(records, pairs=asked_pairs(records, StoreMeta.of(data.meta)))
     return records, comparisons
 
 

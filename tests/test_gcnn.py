@@ -98,13 +98,13 @@ def test_fused_engine_equals_the_torch_path(dtype, rtol):
     """The compiled GCNN pass gives the torch path's loss, gradients and curve costs (to rounding)."""
     import torch
 
-    from codesign.learned.gcnn import _member, _parse
+    from codesign.learned.gcnn import ensemble_member, parse_job
     from codesign.learned.gcnn_bptt import GCNNStack
 
     insts = [paper_instance(s, n=10, degree=4, horizon=12, a_norm=1.05) for s in range(3)]
-    jobs = [_parse(i, dict(dtype=dtype, ensemble=1, steps=5, batch=6, curve_size=9)) for i in insts]
+    jobs = [parse_job(i, dict(dtype=dtype, ensemble=1, steps=5, batch=6, curve_size=9)) for i in insts]
     assert {job.engine for job in jobs} == {"fused"}  # "auto" on the paper's setting
-    members = [_member(job, 0) for job in jobs]
+    members = [ensemble_member(job, 0) for job in jobs]
     loop = jobs[0].settings.loop(12)
     torch_path, fused = GCNNStack(members, loop, engine="torch"), GCNNStack(members, loop, engine="fused")
     rng = np.random.default_rng(0)
@@ -132,10 +132,10 @@ def test_gcnn_engines_agree_and_fused_refuses_node_blocks():
 
 
 def test_auto_takes_the_fused_gcnn_only_where_it_is_faster():
-    from codesign.learned.gcnn import _parse
+    from codesign.learned.gcnn import parse_job
     from compare.families.mass_spring import mass_spring_instance
 
-    assert _parse(paper_instance(0, n=20), {}).engine == "fused"
-    assert _parse(paper_instance(0, n=40, degree=6), {}).engine == "torch"  # dense loops do not unroll
-    assert _parse(paper_instance(0, n=40, degree=6), {"engine": "fused"}).engine == "fused"
-    assert _parse(mass_spring_instance(3), {}).engine == "torch"  # node blocks
+    assert parse_job(paper_instance(0, n=20), {}).engine == "fused"
+    assert parse_job(paper_instance(0, n=40, degree=6), {}).engine == "torch"  # dense loops do not unroll
+    assert parse_job(paper_instance(0, n=40, degree=6), {"engine": "fused"}).engine == "fused"
+    assert parse_job(mass_spring_instance(3), {}).engine == "torch"  # node blocks

@@ -140,11 +140,11 @@ def test_bridge_connects_a_large_draw_with_one_link_per_gap():
     """At N = 600 the first draw's 6-NN graph is not connected; bridging adds one link per gap and keeps the rest."""
     import scipy.sparse.csgraph
 
-    from codesign.instances import _knn_graph
+    from codesign.instances import knn_graph
 
     rng = np.random.default_rng(0)
     positions = rng.uniform(0.0, 1.0, 600)
-    knn = _knn_graph(positions, 6)
+    knn = knn_graph(positions, 6)
     components, _ = scipy.sparse.csgraph.connected_components(knn, directed=False)
     assert components > 1  # the case the rule exists for
     instance = paper_instance(0, n=600, connect="bridge", horizon=5)
@@ -184,7 +184,7 @@ def test_redrawing_gives_up_with_an_error_that_names_the_bridge(monkeypatch):
 @pytest.mark.parametrize("kind", ["uniform", "ties", "rounded"])
 def test_the_sorted_line_gives_the_dense_sort_nearest_neighbours_ties_included(kind):
     """Every draw's neighbour sets are the dense stable argsort's, also where positions repeat or distances tie."""
-    from codesign.instances import _is_connected, _knn_graph, _knn_neighbours
+    from codesign.instances import is_connected, knn_graph, knn_neighbours
 
     rng = np.random.default_rng(["uniform", "ties", "rounded"].index(kind))
     for _ in range(300):
@@ -193,11 +193,11 @@ def test_the_sorted_line_gives_the_dense_sort_nearest_neighbours_ties_included(k
         positions = {"uniform": lambda: rng.uniform(0.0, 1.0, n), "ties": lambda: rng.integers(0, 6, n) / 7.0,
                      "rounded": lambda: np.round(rng.uniform(0.0, 1.0, n), 2)}[kind]()
         dense = np.argsort(np.abs(positions[:, None] - positions[None, :]), axis=1, kind="stable")[:, :degree]
-        window = _knn_neighbours(positions, degree)
+        window = knn_neighbours(positions, degree)
         assert np.array_equal(np.sort(window, axis=1), np.sort(dense, axis=1))
-        graph = _knn_graph(positions, degree)
+        graph = knn_graph(positions, degree)
         components = scipy.sparse.csgraph.connected_components(graph, directed=False, return_labels=False)
-        assert _is_connected(window) == (components == 1)
+        assert is_connected(window) == (components == 1)
 
 
 def test_a_hopeless_redraw_ends_with_the_default_limit():

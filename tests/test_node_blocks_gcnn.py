@@ -205,7 +205,7 @@ def test_block_loss_reduces_to_the_hand_written_one():
 def test_one_state_per_node_with_other_costs_trains_on_the_autograd_path():
     base = paper_instance(2, n=6, horizon=10)
     inst = Instance.from_matrices(base.A, base.B, R=3 * np.eye(6), comm_adj=base.comm_adj, horizon=10)
-    assert inst.scalar_nodes and gm()._layout(inst) == (6, 6, 1, 1) and gm()._layout(base) is None
+    assert inst.scalar_nodes and gm().node_layout(inst) == (6, 6, 1, 1) and gm().node_layout(base) is None
     d = gcnn(inst, steps=10, ensemble=1, stability_steps=0, curve_size=20)
     assert d.status == "optimal" and d.controller.H.shape == (5, 32) and d.controller.w.shape == (32,)
     assert set(d.controller.arrays()) == {"S", "H", "w"}
@@ -225,7 +225,7 @@ def test_block_bptt_matches_autograd(chain, uneven):
                                       comm_adj=np.ones((3, 3)))
     else:
         inst = chain
-    _, N, p, q = gm()._layout(inst)
+    _, N, p, q = gm().node_layout(inst)
     rng = np.random.default_rng(3)
 
     def stack(arrays):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import compare.registry  # noqa: F401  (the built-ins: importing a family registers no method)
 from codesign import compare_exact_and_simulated, controller_from_arrays, count_links, get_method
 from codesign.evaluation import impulse_responses
 from codesign.learned.grnn import GRNNController, LinearGRNNController, _padded_problem

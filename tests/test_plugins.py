@@ -9,6 +9,7 @@ import time
 
 import pytest
 from click.testing import CliRunner
+from tiny_specs import tiny_spec  # tests/tiny_specs.py
 
 from compare import Store, parse_spec, run_experiment
 from compare.cli import main
@@ -30,20 +31,7 @@ PLUGIN = textwrap.dedent('''
         return score(instance, StaticGain(np.where(mask, K, 0.0)))
 ''')
 
-SPEC = textwrap.dedent('''
-    name = "mine"
-    [instances]
-    n = [8]
-    a_norms = [0.995, 1.05]
-    seeds = 2
-    degree = 4
-    horizon = 10
-    [[methods]]
-    method = "lqr"
-    [[methods]]
-    method = "my_methods:trunc10"
-    grid = { links = [2, 6] }
-''')
+SPEC = tiny_spec("mine", methods=("lqr", "my_methods:trunc10"), tail="grid = { links = [2, 6] }\n")
 
 
 @pytest.fixture(autouse=True)

@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+from tiny_specs import tiny_spec  # tests/tiny_specs.py
 
 from compare.report import aggregate, budget_costs, pareto_front, plant_links, plot_cost_vs_links
 
@@ -198,25 +199,12 @@ def test_sections_come_from_declarations_not_names(tmp_path):
     from compare import Store, parse_spec, run_experiment
     from compare.cli import _write_report
 
-    spec = """
-name = "{name}"
-{report}
-[instances]
-n = [8]
-a_norms = [0.995, 1.05]
-seeds = 2
-degree = 4
-horizon = 10
-[[methods]]
-method = "lqr"
-[[methods]]
-method = "autonomous"
-"""
     for name, report, expected in (("renamed-table", '[report]\nsections = ["table1"]', True),
                                    ("table1-lookalike", "", False)):
         out = tmp_path / name
+        spec = tiny_spec(name, methods=("lqr", "autonomous"), head=f"{report}\n")
         with Store(out / "results.sqlite") as store:
-            run_experiment(parse_spec(spec.format(name=name, report=report)), store, workers=1, progress=False)
+            run_experiment(parse_spec(spec), store, workers=1, progress=False)
             _write_report(store, out)
         assert ("## Table 1" in (out / "report.md").read_text()) is expected
         # LQR is the only design on the axis here (the autonomous loop is off it): the off-scale
@@ -279,7 +267,7 @@ def test_the_qi_boundary_is_named_in_the_legend_not_under_the_markers():
 
 def test_report_says_how_many_simulated_costs_were_refined_on_importance_draws():
     from compare.records import Records
-    from compare.report_tables import _precision_text
+    from compare.report_tables import precision_text
 
     def row(stderr, estimator, importance):
         return {"cost": 2.0, "cost_stderr": stderr, "cost_kind": "simulated", "status": "optimal",
@@ -288,25 +276,25 @@ def test_report_says_how_many_simulated_costs_were_refined_on_importance_draws()
 
     records = Records.from_rows([row(2e-4, "control variates: all 210 quadratic monomials", 0),
                                  row(1.6e-3, "importance sampling tilted along ...", 62000)])
-    text = _precision_text(records)
+    text = precision_text(records)
     assert text.startswith(" (control variates; 1 heavy-tailed cost re-estimated on up to 62,000")
     assert "largest 0.080%" in text and "median of 1.00%" in text
-    plain = _precision_text(Records.from_rows([row(2e-4, "control variates: ...", 0)]))
+    plain = precision_text(Records.from_rows([row(2e-4, "control variates: ...", 0)]))
     assert "re-estimated" not in plain and plain.startswith(" (control variates; relative")
 
 
 def test_report_warns_about_costs_that_stay_imprecise_after_refinement():
     from compare.records import Records
-    from compare.report_tables import _uncertain_text
+    from compare.report_tables import uncertain_text
 
     def row(label, stderr, a_norm):
         return {"label": label, "cost": 2.0, "cost_stderr": stderr, "cost_kind": "simulated", "status": "optimal",
                 "instance": {"family": "paper", "n": 20, "a_norm": a_norm, "seed": 0},
                 "extras": {"cost_estimator": "importance sampling ...", "importance_draws": 126000}}
 
-    assert _uncertain_text(Records.from_rows([row("GRNN", 1.9e-3, 1.2)])) == ""  # 0.1 %: imprecise, not unresolved
-    text = _uncertain_text(Records.from_rows([row("GRNN", 0.3, 1.2), row("GRNN", 0.1, 1.2), row("GCNN", 0.03, 1.05),
-                                              row("GCNN", 1e-3, 1.2)]))
+    assert uncertain_text(Records.from_rows([row("GRNN", 1.9e-3, 1.2)])) == ""  # 0.1 %: imprecise, not unresolved
+    text = uncertain_text(Records.from_rows([row("GRNN", 0.3, 1.2), row("GRNN", 0.1, 1.2), row("GCNN", 0.03, 1.05),
+                                             row("GCNN", 1e-3, 1.2)]))
     assert text.startswith(" 3 simulated costs keep a relative standard error above 1%")
     assert "(1 of GCNN on N = 20, ‖A‖₂ = 1.05; 2 of GRNN on N = 20, ‖A‖₂ = 1.2)" in text
     assert "rare initial states" in text and "docs/evaluation.md" in text

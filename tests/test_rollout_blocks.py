@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from codesign import evaluation, paper_instance, simulate, validation_set
-from codesign.evaluation import ROLLOUT_BOUND, _step_loop
+from codesign.evaluation import ROLLOUT_BOUND, step_loop
 from codesign.learned import GCNNController
 
 
@@ -36,8 +36,8 @@ def _gcnn(inst, seed=0):
 
 def _whole(inst, controller, x):
     """The step loop over the whole batch at once: costs divided by trace P, bounded, max_state."""
-    costs, bounded, max_state = _step_loop(inst, controller, x, inst.horizon, 0.0, None, ROLLOUT_BOUND,
-                                           float(np.max(np.abs(x))))
+    costs, bounded, max_state = step_loop(inst, controller, x, inst.horizon, 0.0, None, ROLLOUT_BOUND,
+                                          float(np.max(np.abs(x))))
     return costs / inst.trace_P, bounded, max_state
 
 
@@ -59,7 +59,7 @@ def test_blocks_hold_four_thousand_states(inst):
 
 
 def test_block_size_follows_the_states(inst, monkeypatch):
-    monkeypatch.setattr(evaluation, "_BLOCK_STATES", 3 * inst.n)
+    monkeypatch.setattr(evaluation, "BLOCK_STATES", 3 * inst.n)
     c = Recording(_gcnn(inst, seed=1))
     x = validation_set(inst, 10)
     rollout = simulate(inst, c, x, control_variates=False)

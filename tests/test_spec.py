@@ -1,24 +1,11 @@
 import dataclasses
 
 import pytest
+from tiny_specs import tiny_spec  # tests/tiny_specs.py
 
 from compare import SpecError, load_spec, parse_spec, preset_names
 
-BASE = """
-name = "t"
-[instances]
-family = "paper"
-n = [8]
-a_norms = [0.995, 1.05]
-seeds = 2
-degree = 4
-horizon = 10
-[[methods]]
-method = "lqr"
-[[methods]]
-method = "decentralized"
-grid = { start = ["lqr_diagonal", "zero"] }
-"""
+BASE = tiny_spec("t", family="paper", methods=("lqr", "decentralized"), tail='grid = { start = ["lqr_diagonal", "zero"] }\n')
 
 
 def test_parse_and_expand():

@@ -7,7 +7,7 @@ import pytest
 
 from baselines import decentralized, polish_gain
 from baselines._sparse import gain_design
-from baselines.sparse_delayed import _gain_design as delayed_design
+from baselines.sparse_delayed import delayed_gain_design as delayed_design
 from baselines.stabilizing import STABILITY_TOL, is_stable, local_starts
 from codesign import Instance, get_method, paper_instance, registered_methods, spectral_radius
 from codesign.status import DIVERGED, USABLE

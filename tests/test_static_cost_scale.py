@@ -80,13 +80,13 @@ def test_structured_cost_and_gradient_match_the_dense_formulas(which, request, m
 
 @pytest.mark.parametrize("fraction", [0.0, 1.0])
 def test_masked_product_blocks_and_full_product_agree(fraction, monkeypatch):
-    """Both ways of :class:`_MaskedProduct` (row blocks, or the full product) give the masked ``sum M_t S_t``."""
+    """Both ways of :class:`MaskedProduct` (row blocks, or the full product) give the masked ``sum M_t S_t``."""
     monkeypatch.setattr(evaluation, "_MASK_DENSE_FRACTION", fraction)
     rng = np.random.default_rng(1)
     m, n = 37, 50
     mask = rng.random((m, n)) < 0.08
     mask[5] = False  # a row with no free entry
-    product = evaluation._MaskedProduct(mask)
+    product = evaluation.MaskedProduct(mask)
     assert product.full == (fraction == 0.0)
     total = np.zeros((m, n))
     for _ in range(3):
@@ -106,7 +106,7 @@ def test_a_local_pattern_in_scrambled_order_takes_row_blocks():
     offsets = np.subtract.outer(np.arange(n), np.arange(n))
     order = np.random.default_rng(2).permutation(n)
     mask = (np.abs(offsets) <= 2)[np.ix_(order, order)]
-    product = evaluation._MaskedProduct(mask)
+    product = evaluation.MaskedProduct(mask)
     assert not product.full
     assert sum(len(rows) * len(cols) for rows, cols, _, _ in product.blocks) < 0.1 * mask.size
 

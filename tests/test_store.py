@@ -3,25 +3,12 @@ import sys
 
 import numpy as np
 import pytest
+from tiny_specs import tiny_spec  # tests/tiny_specs.py
 
 from codesign import Design
 from compare import Store, StoreError, parse_spec, run_experiment
 
-SPEC = """
-name = "s"
-[instances]
-n = [8]
-a_norms = [1.05]
-seeds = 3
-degree = 4
-horizon = 10
-[[methods]]
-method = "lqr"
-[[methods]]
-method = "autonomous"
-[[methods]]
-method = "decentralized"
-"""
+SPEC = tiny_spec("s", a_norms=(1.05,), seeds=3)
 
 
 def test_run_store_and_resume(tmp_path):

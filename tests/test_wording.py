@@ -9,7 +9,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.colors import to_hex  # noqa: E402
 
-from compare.findings import BOUND_LABEL, select_comparisons, unresolved  # noqa: E402
+from compare.findings import select_comparisons, unresolved  # noqa: E402
 from compare.findings_text import EQUAL_WORDS, complete_plant_panels, findings_markdown  # noqa: E402
 from compare.forest import plot_forest  # noqa: E402
 from compare.pattern_gaps import pattern_gap_section  # noqa: E402

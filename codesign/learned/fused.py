@@ -32,7 +32,10 @@ import numpy as np
 
 from .engines import FUSED_DENSE_NODES, FUSED_DENSE_S, s_supports
 
-__all__ = ["FusedStack", "Plan", "Workspace", "DENSE_S", "DENSE_AB"]
+__all__ = ["FusedStack", "Plan", "Workspace", "DENSE_S", "DENSE_AB",
+           # the compiled helpers the GCNN kernel and the GRNN rollout share
+           "tanh_constants", "tanh32", "tanh64", "feature_mix", "add_input", "readout", "sparse_rows", "dense_mix",
+           "padded_rows"]
 
 #: Enter the code fingerprint of every method that trains through this module.
 FINGERPRINT_PACKAGES = ("numba", "llvmlite")
@@ -82,7 +85,7 @@ _helper = functools.partial(_jit, inline="always")
 DENSE_S, DENSE_AB = FUSED_DENSE_S, 0.4
 
 
-def _tanh_constants(dtype):
+def tanh_constants(dtype):
     """Taylor coefficients of exp (highest first), and (clamp, ln 2 high, ln 2 low, log2 e, 2, 1/2).
 
     The clamp keeps 2^q exact in the integer type (q <= 58 or 29) and is where
@@ -122,12 +125,14 @@ def _make_tanh(int_type, float_type):
     return tanh
 
 
-_tanh32 = _make_tanh(np.int32, np.float32)
-_tanh64 = _make_tanh(np.int64, np.float64)
+#: ``tanh(z, coef, consts)``: z = tanh(z) in place, in float32 (int32 range reduction) and in float64; ``coef``
+#: and ``consts`` from :func:`tanh_constants` of the same dtype.
+tanh32 = _make_tanh(np.int32, np.float32)
+tanh64 = _make_tanh(np.int64, np.float64)
 
 
 @_helper
-def _feature_mix(out, Z, W, transpose, N, h, B, zero):
+def feature_mix(out, Z, W, transpose, N, h, B, zero):
     """out[j, (l, b)] = sum_k W[k, l] Z[j, (k, b)] (W[l, k] when transposed); rows of h B."""
     for j in range(N):
         zj, oj = Z[j], out[j]
@@ -140,7 +145,7 @@ def _feature_mix(out, Z, W, transpose, N, h, B, zero):
 
 
 @_helper
-def _add_input(Z, X, F, N, h, B):
+def add_input(Z, X, F, N, h, B):
     """Z[i, (l, b)] += F[l] X[i, b]: each node's own signal into its h features."""
     for i in range(N):
         zi, xi = Z[i], X[i]
@@ -151,7 +156,7 @@ def _add_input(Z, X, F, N, h, B):
 
 
 @_helper
-def _readout(U, Z, G, N, h, B, zero):
+def readout(U, Z, G, N, h, B, zero):
     """U[i, b] = sum_l G[l] Z[i, (l, b)]: each node's input from its h features."""
     for i in range(N):
         zi, ui = Z[i], U[i]
@@ -163,7 +168,7 @@ def _readout(U, Z, G, N, h, B, zero):
 
 
 @_helper
-def _sparse_rows(out, inp, ptr, cols, vals, zero):
+def sparse_rows(out, inp, ptr, cols, vals, zero):
     """out[i] = sum_e vals[e] inp[cols[e]] over row i's entries, four at a time (padded)."""
     C = out.shape[1]
     for i in range(out.shape[0]):
@@ -184,7 +189,7 @@ def _sparse_rows(out, inp, ptr, cols, vals, zero):
 
 @_helper
 def _sparse_rows_and_dots(out, inp, ptr, cols, rows, vals, Y, dS, zero):
-    """_sparse_rows for the transposed pattern of S (row j, entries i), adding
+    """sparse_rows for the transposed pattern of S (row j, entries i), adding
     dS[i, j] += inp[i] . Y[j] on the way, while inp[i] is in registers."""
     C = out.shape[1]
     for j in range(out.shape[0]):
@@ -210,7 +215,7 @@ def _sparse_rows_and_dots(out, inp, ptr, cols, rows, vals, Y, dS, zero):
 
 
 @_helper
-def _dense_mix(out, mat, inp, transpose, N, zero):
+def dense_mix(out, mat, inp, transpose, N, zero):
     """out (N, C) = mat @ inp (mat' @ inp when transposed); mat (N, N), inp (N, C)."""
     C = out.shape[1]
     for i in range(N):
@@ -255,7 +260,7 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
     dt = np.dtype(dtype_name).type
     HB = h * B
     ZERO, C2 = dt(0.0), dt(2.0 / B)
-    COEF, CONSTS = _tanh_constants(dt)
+    COEF, CONSTS = tanh_constants(dt)
     WIDE = dt == np.float64
 
     # Every array is an argument of its own, so that the noalias pipeline marks each one: arrays
@@ -287,20 +292,20 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
                 slot = t if backward else t % 2
                 Z = Zs[slot]
                 if t > 0:
-                    _feature_mix(Y, Zs[t - 1] if backward else Zs[1 - slot], Wm, False, N, h, B, ZERO)
+                    feature_mix(Y, Zs[t - 1] if backward else Zs[1 - slot], Wm, False, N, h, B, ZERO)
                     if s_dense[m]:
-                        _dense_mix(Z, Sm, Y, False, N, ZERO)
+                        dense_mix(Z, Sm, Y, False, N, ZERO)
                     else:
-                        _sparse_rows(Z, Y, s_ptr[m], s_cols[m], s_vals, ZERO)
+                        sparse_rows(Z, Y, s_ptr[m], s_cols[m], s_vals, ZERO)
                 else:
                     Z[:] = ZERO
-                _add_input(Z, xu, Fm, N, h, B)
+                add_input(Z, xu, Fm, N, h, B)
                 if squash and WIDE:
-                    _tanh64(Z.reshape(N * HB), COEF, CONSTS)
+                    tanh64(Z.reshape(N * HB), COEF, CONSTS)
                 elif squash:
-                    _tanh32(Z.reshape(N * HB), COEF, CONSTS)
-                _readout(xu[N:], Z, Gm, N, h, B, ZERO)
-                _sparse_rows(XU[t + 1, :N], xu, ab_ptr[m], ab_cols[m], ab_vals[m], ZERO)
+                    tanh32(Z.reshape(N * HB), COEF, CONSTS)
+                readout(xu[N:], Z, Gm, N, h, B, ZERO)
+                sparse_rows(XU[t + 1, :N], xu, ab_ptr[m], ab_cols[m], ab_vals[m], ZERO)
                 x, u = xu[:N], xu[N:]
                 if q_identity and r_identity:  # one flat pass over x(t) and u(t)
                     flat = xu.reshape(2 * N * B)
@@ -308,17 +313,17 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
                         Jm += flat[k] * flat[k]
                 else:
                     if not q_identity:
-                        _dense_mix(tmp, Q[m], x, False, N, ZERO)
+                        dense_mix(tmp, Q[m], x, False, N, ZERO)
                     for i in range(N):
                         for b in range(B):
                             Jm += x[i, b] * (x[i, b] if q_identity else tmp[i, b])
                     if not r_identity:
-                        _dense_mix(tmp, R[m], u, False, N, ZERO)
+                        dense_mix(tmp, R[m], u, False, N, ZERO)
                     for i in range(N):
                         for b in range(B):
                             Jm += u[i, b] * (u[i, b] if r_identity else tmp[i, b])
             xT = XU[T, :N]
-            _dense_mix(lam, P[m], xT, False, N, ZERO)
+            dense_mix(lam, P[m], xT, False, N, ZERO)
             lam_flat, xT_flat = lam.reshape(N * B), XU[T].reshape(2 * N * B)
             for k in range(N * B):
                 Jm += xT_flat[k] * lam_flat[k]
@@ -340,13 +345,13 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
                 if ab_dense:  # tmp2 = [A B]' lam
                     _dense_transposed(tmp2, AB[m], lam, N, B, ZERO)
                 else:
-                    _sparse_rows(tmp2, lam, abt_ptr[m], abt_cols[m], abt_vals[m], ZERO)
+                    sparse_rows(tmp2, lam, abt_ptr[m], abt_cols[m], abt_vals[m], ZERO)
                 if r_identity:  # du = B' lam + c2 R u (flat: one long loop)
                     du_flat, u_flat = tmp2.reshape(2 * N * B), xu.reshape(2 * N * B)
                     for k in range(N * B, 2 * N * B):
                         du_flat[k] += C2 * u_flat[k]
                 else:
-                    _dense_mix(tmp, R[m], xu[N:], False, N, ZERO)
+                    dense_mix(tmp, R[m], xu[N:], False, N, ZERO)
                     for i in range(N):
                         di, ti = tmp2[N + i], tmp[i]
                         for b in range(B):
@@ -368,9 +373,9 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
                 if t == 0:
                     break
                 Zp = Zs[t - 1]
-                _feature_mix(Y, Zp, Wm, False, N, h, B, ZERO)  # recomputed: cheaper than kept
+                feature_mix(Y, Zp, Wm, False, N, h, B, ZERO)  # recomputed: cheaper than kept
                 if s_dense[m]:  # dY = S' dPre; dS on the mask
-                    _dense_mix(dY, Sm, dPre, True, N, ZERO)
+                    dense_mix(dY, Sm, dPre, True, N, ZERO)
                     for e in range(g_count[m]):
                         pi, yj = dPre[gr[e]], Y[gc[e]]
                         acc = ZERO
@@ -380,7 +385,7 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
                 elif g_count[m]:  # S trains: its pattern is the mask
                     _sparse_rows_and_dots(dY, dPre, sp, sc, st_rows[m], st_vals, Y, dSm, ZERO)
                 else:
-                    _sparse_rows(dY, dPre, sp, sc, st_vals, ZERO)
+                    sparse_rows(dY, dPre, sp, sc, st_vals, ZERO)
                 for k in range(h):
                     for l in range(h):
                         aw = aW[k * h + l]
@@ -389,9 +394,9 @@ def _kernel(N: int, B: int, h: int, T: int, squash: bool, dtype_name: str, backw
                             for j in range(N):
                                 acc += Zp[j, k * B + b] * dY[j, l * B + b]
                             aw[b] = acc
-                _feature_mix(dZ, dY, Wm, True, N, h, B, ZERO)
+                feature_mix(dZ, dY, Wm, True, N, h, B, ZERO)
                 if not q_identity:
-                    _dense_mix(tmp, Q[m], xu[:N], False, N, ZERO)
+                    dense_mix(tmp, Q[m], xu[:N], False, N, ZERO)
                 for i in range(N):  # lam = A' lam + c2 Q x + F dPre
                     li, ai, xi, ti, pi = lam[i], tmp2[i], xu[i], tmp[i], dPre[i]
                     for b in range(B):
@@ -468,7 +473,7 @@ class Workspace(NamedTuple):
 _ARGUMENTS = ("x0", "S", "F", "W", "G", "J", "dS", "dF", "dW", "dG") + Plan._fields + Workspace._fields
 
 
-def _padded_rows(patterns: np.ndarray, values: np.ndarray | None = None):
+def padded_rows(patterns: np.ndarray, values: np.ndarray | None = None):
     """Row-compressed patterns of a stack (M, R, C) of bool, each row padded to a multiple of 4.
 
     Returns ptr (M, R + 1), cols (M, L), rows (M, L) (-1 on padding) and, with
@@ -518,9 +523,9 @@ class FusedStack:
         # Dense products beat the pattern above about half full (and unroll only for small N).
         s_dense = (support.mean(axis=(1, 2)) > DENSE_S) & (N <= FUSED_DENSE_NODES)
         AB = np.ascontiguousarray(np.concatenate([A, B], axis=2).astype(dt))
-        ab_ptr, ab_cols, _, ab_vals = _padded_rows(AB != 0, AB)
+        ab_ptr, ab_cols, _, ab_vals = padded_rows(AB != 0, AB)
         ABt = np.ascontiguousarray(AB.transpose(0, 2, 1))
-        abt_ptr, abt_cols, _, abt_vals = _padded_rows(ABt != 0, ABt)
+        abt_ptr, abt_cols, _, abt_vals = padded_rows(ABt != 0, ABt)
         g_count = np.where(trainable, mask.sum(axis=(1, 2)), 0).astype(np.int64)
         g_rows = np.zeros((M, max(g_count.max(), 1)), np.int64)
         g_cols = np.zeros_like(g_rows)
@@ -529,8 +534,8 @@ class FusedStack:
                 g_rows[m, :g_count[m]], g_cols[m, :g_count[m]] = np.nonzero(mask[m])
         eye = np.eye(N)
         self.plan = Plan(s_dense, *(np.ascontiguousarray(a, dtype=dt) for a in (Q, R, P)),
-                         bool(np.all(Q == eye)), bool(np.all(R == eye)), *_padded_rows(support),
-                         *_padded_rows(support.transpose(0, 2, 1)), ab_ptr, ab_cols, ab_vals,
+                         bool(np.all(Q == eye)), bool(np.all(R == eye)), *padded_rows(support),
+                         *padded_rows(support.transpose(0, 2, 1)), ab_ptr, ab_cols, ab_vals,
                          abt_ptr, abt_cols, abt_vals, AB,
                          # The transposed product runs faster dense than by pattern unless [A B] is sparse.
                          bool(np.mean(AB != 0) > DENSE_AB), g_rows, g_cols, g_count)

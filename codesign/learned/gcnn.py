@@ -46,14 +46,15 @@ from ..instances import node_ranks, node_width
 from ..methods import Above, AtLeast, AtMost, method
 from ..status import DIVERGED
 from .engines import ENGINES, FUSED_DENSE_NODES
-from .gcnn_bptt import GCNN_FEATURES, GCNN_TAPS, GCNNProblem, GCNNStack, _layout, gcnn_init, tap_map
+from .gcnn_bptt import GCNN_FEATURES, GCNN_TAPS, GCNNProblem, GCNNStack, node_layout, gcnn_init, tap_map
 from .settings import SEED, TrainingSettings, takes_settings
 from .trainer import (Loop, Member, TrainingJob, best_member, curve, diverged_members_message,
                       finish_designs, selection_costs, selection_set, simulated_design, train_jobs)
 
 torch = lazy_import("torch")
 
-__all__ = ["gcnn", "gcnn_batch", "GCNNController", "GCNNSettings", "GCNN_TAPS", "GCNN_FEATURES"]
+__all__ = ["gcnn", "gcnn_batch", "GCNNController", "GCNNSettings", "GCNN_TAPS", "GCNN_FEATURES",
+           "parse_job", "ensemble_member"]
 
 _DATA, _INIT = 21, 22
 
@@ -268,12 +269,13 @@ class _Job:
     engine: str = "torch"  # the one that runs ("auto" resolved)
 
 
-def _parse(instance, kwargs: dict) -> _Job:
+def parse_job(instance, kwargs: dict) -> _Job:
+    """One design's settings checked (``kwargs`` of :func:`gcnn`) and its engine chosen (``"auto"`` resolved)."""
     kwargs = dict(kwargs)
     seed = kwargs.pop("seed", 0)
     SEED.check(seed, "seed")
     settings = GCNNSettings.parse(kwargs, "GCNN")
-    paper_setting = _layout(instance) is None
+    paper_setting = node_layout(instance) is None
     if settings.engine == "fused" and not paper_setting:
         raise ValueError("engine 'fused' needs one state and one input per node and Q = R = I; "
                          "use engine 'torch' or 'auto'")
@@ -286,7 +288,8 @@ def _parse(instance, kwargs: dict) -> _Job:
                 engine)
 
 
-def _member(job: _Job, m: int) -> Member:
+def ensemble_member(job: _Job, m: int) -> Member:
+    """Ensemble member ``m`` of a parsed job (:func:`parse_job`): its initial weights and seeds, ready to train."""
     inst, s = job.instance, job.settings
     channels, outputs = node_width(inst.state_nodes), node_width(inst.input_nodes)
     H0, w0 = gcnn_init(np.random.default_rng([job.seed, m, _INIT]), GCNN_TAPS, GCNN_FEATURES, channels, outputs)
@@ -296,9 +299,9 @@ def _member(job: _Job, m: int) -> Member:
 
 def gcnn_batch(jobs, *, stack_size: int = 64) -> list[Design]:
     """Train many GCNN designs together; ``jobs`` is an iterable of (Instance, kwargs of :func:`gcnn`)."""
-    parsed = [_parse(instance, kwargs) for instance, kwargs in jobs]
+    parsed = [parse_job(instance, kwargs) for instance, kwargs in jobs]
     trained, seconds = train_jobs(
-        [TrainingJob(GCNNStack, [_member(job, m) for m in range(job.settings.ensemble)],
+        [TrainingJob(GCNNStack, [ensemble_member(job, m) for m in range(job.settings.ensemble)],
                      job.settings.loop(job.instance.horizon), options=(("engine", job.engine),))
          for job in parsed], stack_size=stack_size)
     return finish_designs(_finish, [(job, results, seconds[j]) for j, (job, results) in enumerate(zip(parsed, trained))],
@@ -337,7 +340,7 @@ def _finish(job: _Job, results, seconds) -> Design:
 
 def _dense_path_limit(instance, params: dict):
     """Off the paper's setting (node blocks, Q or R not I) the GCNN trains by dense products: its old limit."""
-    if _layout(instance) is None:
+    if node_layout(instance) is None:
         return None
     return 300, ("off the paper's setting (nodes with several states or inputs, or Q, R other than I) its graph "
                  "filters are dense N x N products: one design takes 127 s at 200 states with the default settings")

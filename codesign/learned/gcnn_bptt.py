@@ -27,7 +27,7 @@ torch = lazy_import("torch")
 #: Imported only when the fused engine runs (it loads numba), yet part of this code's fingerprint.
 FINGERPRINT_MODULES = ("codesign.learned.gcnn_fused",)
 
-__all__ = ["GCNNStack", "GCNN_TAPS", "GCNN_FEATURES", "gcnn_init", "tap_map", "scatter"]
+__all__ = ["GCNNStack", "GCNN_TAPS", "GCNN_FEATURES", "gcnn_init", "tap_map", "scatter", "node_layout"]
 
 GCNN_TAPS = 5
 GCNN_FEATURES = 32
@@ -305,7 +305,7 @@ def _fast(instance) -> bool:
                 and np.array_equal(instance.R, np.eye(instance.m)))
 
 
-def _layout(instance):
+def node_layout(instance):
     """None on the hand-written path, else (m, N, p, q) of the node-block model (part of the stack key)."""
     if _fast(instance):
         return None
@@ -335,8 +335,8 @@ class GCNNStack(StackModel):
         tdt = torch_dtype(loop.dtype)
         problems = [m.problem for m in members]
         insts = [p.instance for p in problems]
-        layout = _layout(insts[0])
-        if any(_layout(i) != layout for i in insts):
+        layout = node_layout(insts[0])
+        if any(node_layout(i) != layout for i in insts):
             raise ValueError("every GCNN of a stack needs the same node layout")
         M, horizon, n, batch = len(members), loop.horizon, insts[0].n, loop.batch
         curve_size = np.shape(members[0].curve_x0)[0]
@@ -401,7 +401,7 @@ class GCNNStack(StackModel):
     @classmethod
     def shape_key(cls, member: Member) -> tuple:
         inst = member.problem.instance
-        return member.shape_key() + (inst.n, _layout(inst))
+        return member.shape_key() + (inst.n, node_layout(inst))
 
     def loss_and_grad(self, x0):
         return self._loss_and_grad(x0)

@@ -18,7 +18,7 @@ import functools
 
 import numpy as np
 
-from .fused import _dense_mix, _tanh32, _tanh64, _tanh_constants, kernel_jit
+from .fused import dense_mix, kernel_jit, tanh32, tanh64, tanh_constants
 
 __all__ = ["FusedGCNN"]
 
@@ -29,7 +29,7 @@ def _kernel(N: int, B: int, K: int, F: int, T: int, dtype_name: str, backward: b
     dt = np.dtype(dtype_name).type
     NB = N * B
     ZERO, ONE, C2 = dt(0.0), dt(1.0), dt(2.0 / B)
-    COEF, CONSTS = _tanh_constants(dt)
+    COEF, CONSTS = tanh_constants(dt)
     WIDE = dt == np.float64
 
     @kernel_jit
@@ -50,7 +50,7 @@ def _kernel(N: int, B: int, K: int, F: int, T: int, dtype_name: str, backward: b
                 xk, a, u = XK[slot], Acts[slot], U[t] if backward else U[0]
                 xk[0] = x.reshape(NB)
                 for k in range(1, K):
-                    _dense_mix(xk[k].reshape(N, B), Sm, xk[k - 1].reshape(N, B), False, N, ZERO)
+                    dense_mix(xk[k].reshape(N, B), Sm, xk[k - 1].reshape(N, B), False, N, ZERO)
                 for f in range(F):
                     af = a[f]
                     for c in range(NB):
@@ -59,23 +59,23 @@ def _kernel(N: int, B: int, K: int, F: int, T: int, dtype_name: str, backward: b
                             acc += Hm[k, f] * xk[k, c]
                         af[c] = acc
                 if WIDE:
-                    _tanh64(a.reshape(F * NB), COEF, CONSTS)
+                    tanh64(a.reshape(F * NB), COEF, CONSTS)
                 else:
-                    _tanh32(a.reshape(F * NB), COEF, CONSTS)
+                    tanh32(a.reshape(F * NB), COEF, CONSTS)
                 uf = u.reshape(NB)
                 for c in range(NB):
                     acc = ZERO
                     for f in range(F):
                         acc += wm[f] * a[f, c]
                     uf[c] = acc
-                _dense_mix(x_next, Am, x, False, N, ZERO)
-                _dense_mix(tmp, Bmm, u, False, N, ZERO)
+                dense_mix(x_next, Am, x, False, N, ZERO)
+                dense_mix(tmp, Bmm, u, False, N, ZERO)
                 xf, nf, tf = x.reshape(NB), x_next.reshape(NB), tmp.reshape(NB)
                 for c in range(NB):
                     nf[c] += tf[c]
                     Jm += xf[c] * xf[c] + uf[c] * uf[c]
             xT = X[T] if backward else X[T % 2]
-            _dense_mix(lam, P[m], xT, False, N, ZERO)
+            dense_mix(lam, P[m], xT, False, N, ZERO)
             lf, xf = lam.reshape(NB), xT.reshape(NB)
             for c in range(NB):
                 Jm += xf[c] * lf[c]
@@ -88,7 +88,7 @@ def _kernel(N: int, B: int, K: int, F: int, T: int, dtype_name: str, backward: b
             dwm[:] = ZERO
             for t in range(T - 1, -1, -1):
                 a, xk = Acts[t], XK[t]
-                _dense_mix(du, Bmm, lam, True, N, ZERO)  # du = B' lam + c2 u
+                dense_mix(du, Bmm, lam, True, N, ZERO)  # du = B' lam + c2 u
                 df, uf = du.reshape(NB), U[t].reshape(NB)
                 for c in range(NB):
                     df[c] += C2 * uf[c]
@@ -119,11 +119,11 @@ def _kernel(N: int, B: int, K: int, F: int, T: int, dtype_name: str, backward: b
                         dk[c] = acc
                 g[:] = dXK[K - 1].reshape(N, B)  # back through XK[k] = S XK[k - 1]
                 for k in range(K - 2, -1, -1):
-                    _dense_mix(tmp, Sm, g, True, N, ZERO)
+                    dense_mix(tmp, Sm, g, True, N, ZERO)
                     gf, tf, dk = g.reshape(NB), tmp.reshape(NB), dXK[k]
                     for c in range(NB):
                         gf[c] = dk[c] + tf[c]
-                _dense_mix(tmp, Am, lam, True, N, ZERO)  # lam = g + A' lam + c2 x(t)
+                dense_mix(tmp, Am, lam, True, N, ZERO)  # lam = g + A' lam + c2 x(t)
                 gf, tf, xf, lf = g.reshape(NB), tmp.reshape(NB), X[t].reshape(NB), lam.reshape(NB)
                 for c in range(NB):
                     lf[c] = gf[c] + tf[c] + C2 * xf[c]

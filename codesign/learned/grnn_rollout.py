@@ -19,8 +19,8 @@ import functools
 
 import numpy as np
 
-from .fused import (_add_input, _dense_mix, _feature_mix, _padded_rows, _readout, _sparse_rows, _tanh64,
-                    _tanh_constants, kernel_jit)
+from .fused import (add_input, dense_mix, feature_mix, kernel_jit, padded_rows, readout, sparse_rows, tanh64,
+                    tanh_constants)
 
 __all__ = ["BLOCK", "rollout_costs"]
 
@@ -35,7 +35,7 @@ BLOCK = 64
 @functools.lru_cache(maxsize=None)
 def _kernel(h: int, squash: bool, q_identity: bool, r_identity: bool):
     """The rollout for ``h`` hidden features (a compile-time constant, as the block size is)."""
-    coef, consts = _tanh_constants(np.float64)
+    coef, consts = tanh_constants(np.float64)
     zero = 0.0
     width = h * BLOCK
 
@@ -55,24 +55,24 @@ def _kernel(h: int, squash: bool, q_identity: bool, r_identity: bool):
             Zp[:] = zero
             acc[:] = zero
             for t in range(T):
-                _feature_mix(Y, Zp, W, False, N, h, BLOCK, zero)  # Y_j = W' Z_j(t - 1)
-                _sparse_rows(Z, Y, s_ptr, s_cols, s_vals, zero)  # Z_i = sum_j S_ij Y_j
-                _add_input(Z, XU, F, N, h, BLOCK)
+                feature_mix(Y, Zp, W, False, N, h, BLOCK, zero)  # Y_j = W' Z_j(t - 1)
+                sparse_rows(Z, Y, s_ptr, s_cols, s_vals, zero)  # Z_i = sum_j S_ij Y_j
+                add_input(Z, XU, F, N, h, BLOCK)
                 if squash:
-                    _tanh64(Z.reshape(N * width), coef, consts)
-                _readout(XU[N:], Z, G, N, h, BLOCK, zero)
+                    tanh64(Z.reshape(N * width), coef, consts)
+                readout(XU[N:], Z, G, N, h, BLOCK, zero)
                 x, u = XU[:N], XU[N:]
                 if not q_identity:
-                    _dense_mix(tmp, Q, x, False, N, zero)
+                    dense_mix(tmp, Q, x, False, N, zero)
                 for i in range(N):
                     for b in range(BLOCK):
                         acc[b] += x[i, b] * (x[i, b] if q_identity else tmp[i, b])
                 if not r_identity:
-                    _dense_mix(tmp, R, u, False, N, zero)
+                    dense_mix(tmp, R, u, False, N, zero)
                 for i in range(N):
                     for b in range(BLOCK):
                         acc[b] += u[i, b] * (u[i, b] if r_identity else tmp[i, b])
-                _sparse_rows(XN, XU, ab_ptr, ab_cols, ab_vals, zero)  # x(t + 1) = A x(t) + B u(t)
+                sparse_rows(XN, XU, ab_ptr, ab_cols, ab_vals, zero)  # x(t + 1) = A x(t) + B u(t)
                 peak = zero
                 for i in range(N):
                     for b in range(BLOCK):
@@ -83,7 +83,7 @@ def _kernel(h: int, squash: bool, q_identity: bool, r_identity: bool):
                             peak = a if a == a else np.inf
                 peaks[blk, t] = peak
                 Z, Zp = Zp, Z
-            _dense_mix(tmp, P, XU[:N], False, N, zero)
+            dense_mix(tmp, P, XU[:N], False, N, zero)
             for i in range(N):
                 for b in range(BLOCK):
                     acc[b] += XU[i, b] * tmp[i, b]
@@ -123,9 +123,9 @@ def rollout_costs(instance, S, F, W, G, x0, steps: int, *, squash: bool = True):
     blocks = -(-batch // BLOCK)
     x = np.zeros((blocks * BLOCK, N))  # the last block's missing draws start at 0 and cost 0
     x[:batch] = x0
-    s_ptr, s_cols, _, s_vals = _padded_rows((S != 0)[None], np.asarray(S, dtype=float)[None])
+    s_ptr, s_cols, _, s_vals = padded_rows((S != 0)[None], np.asarray(S, dtype=float)[None])
     AB = np.concatenate([A, B], axis=1)
-    ab_ptr, ab_cols, _, ab_vals = _padded_rows((AB != 0)[None], AB[None])
+    ab_ptr, ab_cols, _, ab_vals = padded_rows((AB != 0)[None], AB[None])
     eye = np.eye(N)
     kernel = _kernel(h, bool(squash), bool(np.array_equal(Q, eye)), bool(np.array_equal(R, eye)))
     costs = np.empty(blocks * BLOCK)

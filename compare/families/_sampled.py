@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..spec import SpecError, _list_of, _typed
+from ..parsing import SpecError, list_of, typed
 
 #: Entries of the discretized A and B below this fraction of their largest are set to zero:
 #: the matrix exponential couples every pair of states, mostly by rounding-level amounts.
@@ -23,11 +23,11 @@ def zoh(Ac, Bc, dt: float) -> tuple[np.ndarray, np.ndarray]:
 
 def parse_sampling(table: dict, *, noun: str, dt: float) -> tuple[tuple, float, int]:
     """The keys every sampled family has: sizes ``n`` (>= 2 ``noun``), sampling time ``dt`` and ``horizon``."""
-    sizes = _list_of("instances.n", table.get("n", [20]), int)
+    sizes = list_of("instances.n", table.get("n", [20]), int)
     if any(n < 2 for n in sizes):
         raise SpecError(f"instances.n: at least 2 {noun}, got {list(sizes)}")
-    dt = _typed("instances.dt", table.get("dt", dt), float)
-    horizon = _typed("instances.horizon", table.get("horizon", 50), int)
+    dt = typed("instances.dt", table.get("dt", dt), float)
+    horizon = typed("instances.horizon", table.get("horizon", 50), int)
     if not dt > 0:
         raise SpecError(f"instances.dt: must be positive, got {dt}")
     if horizon < 1:

@@ -34,7 +34,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..spec import SpecError, _check_keys, _list_of, _typed
+from ..parsing import SpecError, check_keys, list_of, typed
 from . import Family, register_family
 
 __all__ = ["chain_instance", "actuated_nodes"]
@@ -50,8 +50,8 @@ def actuated_nodes(n: int, density: float) -> np.ndarray:
 
 def parse_actuation(table: dict) -> tuple[float, int]:
     """The ``actuation`` density (in (0, 1], default 1) and ``horizon`` (>= 1, default 50) keys of a table."""
-    actuation = _typed("instances.actuation", table.get("actuation", 1.0), float)
-    horizon = _typed("instances.horizon", table.get("horizon", 50), int)
+    actuation = typed("instances.actuation", table.get("actuation", 1.0), float)
+    horizon = typed("instances.horizon", table.get("horizon", 50), int)
     if not 0 < actuation <= 1:
         raise SpecError(f"instances.actuation: an actuation density must be in (0, 1], got {actuation}")
     if horizon < 1:
@@ -83,12 +83,12 @@ def chain_instance(n: int, *, rho: float = 1.0, alpha: float = 0.2, actuation: f
 
 
 def parse(table: dict, base=None) -> tuple:
-    _check_keys("instances", table, KEYS)
-    sizes = _list_of("instances.n", table.get("n", [20]), int)
+    check_keys("instances", table, KEYS)
+    sizes = list_of("instances.n", table.get("n", [20]), int)
     if any(n < 2 for n in sizes):
         raise SpecError(f"instances.n: at least 2 nodes, got {list(sizes)}")
-    rho = _typed("instances.rho", table.get("rho", 1.0), float)
-    alpha = _typed("instances.alpha", table.get("alpha", 0.2), float)
+    rho = typed("instances.rho", table.get("rho", 1.0), float)
+    alpha = typed("instances.alpha", table.get("alpha", 0.2), float)
     actuation, horizon = parse_actuation(table)
     if not (math.isfinite(rho) and rho > 0):
         raise SpecError(f"instances.rho: must be positive, got {rho}")

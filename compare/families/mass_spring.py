@@ -41,7 +41,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..spec import SpecError, _check_keys, _typed
+from ..parsing import SpecError, check_keys, typed
 from . import Family, register_family
 from ._sampled import parse_sampling, zoh
 
@@ -75,12 +75,12 @@ def mass_spring_instance(n: int, *, seed: int = 0, dt: float = 0.2, horizon: int
 
 
 def parse(table: dict, base=None) -> tuple:
-    _check_keys("instances", table, KEYS)
+    check_keys("instances", table, KEYS)
     sizes, dt, horizon = parse_sampling(table, noun="masses", dt=0.2)
-    count = _typed("instances.seeds", table.get("seeds", 0), int)
+    count = typed("instances.seeds", table.get("seeds", 0), int)
     if count < 0:
         raise SpecError(f"instances.seeds: must be >= 0, got {count}")
-    r = _typed("instances.r", table.get("r", 10.0), float)
+    r = typed("instances.r", table.get("r", 10.0), float)
     if not r > 0:
         raise SpecError(f"instances.r: must be positive, got {r}")
     seeds = [0] if count == 0 else list(range(1, count + 1))

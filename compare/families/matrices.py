@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..spec import SpecError, _check_keys, _typed
+from ..parsing import SpecError, check_keys, typed
 from . import Family, register_family
 
 KEYS = {"family", "files"}
@@ -43,7 +43,7 @@ def _paths(value, base) -> list[Path]:
     root = Path(base) if base is not None else Path.cwd()
     paths: list[Path] = []
     for i, pattern in enumerate(patterns):
-        pattern = _typed(f"instances.files[{i}]", pattern, str)
+        pattern = typed(f"instances.files[{i}]", pattern, str)
         full = pattern if Path(pattern).is_absolute() else str(root / pattern)
         matches = sorted(glob.glob(full)) if glob.has_magic(full) else [full]
         matches = [Path(m) for m in matches if Path(m).is_file()]
@@ -84,7 +84,7 @@ def _instance(arrays: dict, name: str):
 
 
 def parse(table: dict, base=None) -> tuple:
-    _check_keys("instances", table, KEYS)
+    check_keys("instances", table, KEYS)
     if "files" not in table:
         raise SpecError("instances.files: required for family 'matrices' (paths or globs of .npz files)")
     specs, seen = [], {}

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from codesign.instances import CONNECT_RULES
 
-from ..spec import SpecError, _check_keys, _list_of, _typed
+from ..parsing import SpecError, check_keys, list_of, typed
 from . import Family, register_family
 
 KEYS = {"family", "n", "a_norms", "seeds", "degree", "b_norm", "hops", "horizon", "connect"}
@@ -23,7 +23,7 @@ def _seeds(value) -> tuple:
         if value < 1:
             raise SpecError(f"instances.seeds: a count must be >= 1, got {value}")
         return tuple(range(value))
-    seeds = _list_of("instances.seeds", _typed("instances.seeds", value, list), int, positive=False)
+    seeds = list_of("instances.seeds", typed("instances.seeds", value, list), int, positive=False)
     if any(s < 0 for s in seeds):
         raise SpecError(f"instances.seeds: seeds must be non-negative, got {list(seeds)}")
     if len(set(seeds)) != len(seeds):
@@ -32,15 +32,15 @@ def _seeds(value) -> tuple:
 
 
 def parse(table: dict, base=None) -> tuple:
-    _check_keys("instances", table, KEYS)
+    check_keys("instances", table, KEYS)
     seeds = _seeds(table.get("seeds", 1))
-    sizes = _list_of("instances.n", table.get("n", [20]), int)
-    a_norms = _list_of("instances.a_norms", table.get("a_norms", [0.995]), float)
+    sizes = list_of("instances.n", table.get("n", [20]), int)
+    a_norms = list_of("instances.a_norms", table.get("a_norms", [0.995]), float)
     shared = {
-        "degree": _typed("instances.degree", table.get("degree", 6), int),
-        "b_norm": _typed("instances.b_norm", table.get("b_norm", 1.0), float),
-        "hops": _typed("instances.hops", table.get("hops", 3), int),
-        "horizon": _typed("instances.horizon", table.get("horizon", 50), int),
+        "degree": typed("instances.degree", table.get("degree", 6), int),
+        "b_norm": typed("instances.b_norm", table.get("b_norm", 1.0), float),
+        "hops": typed("instances.hops", table.get("hops", 3), int),
+        "horizon": typed("instances.horizon", table.get("horizon", 50), int),
     }
     if any(n < 2 for n in sizes):
         raise SpecError(f"instances.n: sizes must be >= 2, got {list(sizes)}")
@@ -53,7 +53,7 @@ def parse(table: dict, base=None) -> tuple:
         raise SpecError(f"instances.hops: must be >= 0, got {shared['hops']}")
     if shared["b_norm"] <= 0:
         raise SpecError(f"instances.b_norm: must be positive, got {shared['b_norm']}")
-    connect = _typed("instances.connect", table.get("connect", "redraw"), str)
+    connect = typed("instances.connect", table.get("connect", "redraw"), str)
     if connect not in CONNECT_RULES:
         raise SpecError(f"instances.connect: must be one of {', '.join(CONNECT_RULES)}, got {connect!r}")
     extra = {} if connect == "redraw" else {"connect": connect}

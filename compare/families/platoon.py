@@ -39,7 +39,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..spec import SpecError, _check_keys, _typed
+from ..parsing import SpecError, check_keys, typed
 from . import Family, register_family
 from ._sampled import parse_sampling
 
@@ -65,9 +65,9 @@ def platoon_instance(n: int, *, dt: float = 0.2, r: float = 1.0, horizon: int = 
 
 
 def parse(table: dict, base=None) -> tuple:
-    _check_keys("instances", table, KEYS)
+    check_keys("instances", table, KEYS)
     sizes, dt, horizon = parse_sampling(table, noun="vehicles", dt=0.2)
-    r = _typed("instances.r", table.get("r", 1.0), float)
+    r = typed("instances.r", table.get("r", 1.0), float)
     if not (math.isfinite(r) and r > 0):
         raise SpecError(f"instances.r: must be positive, got {r}")
     return tuple({"family": "platoon", "n": n, "dt": dt, "r": r, "horizon": horizon} for n in sizes)

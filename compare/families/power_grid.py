@@ -99,7 +99,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..spec import SpecError, _check_keys, _list_of, _typed
+from ..parsing import SpecError, check_keys, list_of, typed
 from . import Family, register_family
 from ._sampled import zoh
 
@@ -250,28 +250,28 @@ def _damping(value):
         return "case"
     if isinstance(value, str):
         raise SpecError(f"instances.damping: a number (p.u., machine base) or \"case\", got {value!r}")
-    value = _typed("instances.damping", value, float)
+    value = typed("instances.damping", value, float)
     if value < 0:
         raise SpecError(f"instances.damping: must be >= 0, got {value}")
     return value
 
 
 def parse(table: dict, base=None) -> tuple:
-    _check_keys("instances", table, KEYS)
-    cases = _list_of("instances.case", table.get("case", ["ieee39"]), str, positive=False)
+    check_keys("instances", table, KEYS)
+    cases = list_of("instances.case", table.get("case", ["ieee39"]), str, positive=False)
     for case in cases:
         if case not in CASES:
             raise SpecError(f"instances.case: unknown case {case!r} (known: {', '.join(CASES)})")
     damping = _damping(table.get("damping", 2.0))
     choice = {}
     for key, allowed, default in (("input", INPUTS, "power"), ("cost", COSTS, "coherency")):
-        choice[key] = _typed(f"instances.{key}", table.get(key, default), str)
+        choice[key] = typed(f"instances.{key}", table.get(key, default), str)
         if choice[key] not in allowed:
             raise SpecError(f"instances.{key}: must be one of {', '.join(allowed)}, got {choice[key]!r}")
-    dt = _typed("instances.dt", table.get("dt", 0.1), float)
-    r = _typed("instances.r", table.get("r", 1.0), float)
-    neighbours = _typed("instances.neighbours", table.get("neighbours", 4), int)
-    horizon = _typed("instances.horizon", table.get("horizon", 50), int)
+    dt = typed("instances.dt", table.get("dt", 0.1), float)
+    r = typed("instances.r", table.get("r", 1.0), float)
+    neighbours = typed("instances.neighbours", table.get("neighbours", 4), int)
+    horizon = typed("instances.horizon", table.get("horizon", 50), int)
     if not dt > 0:
         raise SpecError(f"instances.dt: must be positive, got {dt}")
     if not r > 0:

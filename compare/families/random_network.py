@@ -38,7 +38,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..spec import SpecError, _check_keys, _typed
+from ..parsing import SpecError, check_keys, typed
 from . import Family, register_family
 from ._sampled import parse_sampling, zoh
 
@@ -76,13 +76,13 @@ def random_network_instance(n: int, *, seed: int = 0, dt: float = 0.1, horizon: 
 
 
 def parse(table: dict, base=None) -> tuple:
-    _check_keys("instances", table, KEYS)
+    check_keys("instances", table, KEYS)
     sizes, dt, horizon = parse_sampling(table, noun="nodes", dt=0.1)
-    count = _typed("instances.seeds", table.get("seeds", 1), int)
+    count = typed("instances.seeds", table.get("seeds", 1), int)
     if count < 1:
         raise SpecError(f"instances.seeds: a count must be >= 1, got {count}")
-    neighbours = _typed("instances.neighbours", table.get("neighbours", 4), int)
-    side = _typed("instances.side", table.get("side", 0.0), float)
+    neighbours = typed("instances.neighbours", table.get("neighbours", 4), int)
+    side = typed("instances.side", table.get("side", 0.0), float)
     if any(not 1 <= neighbours < n for n in sizes):
         raise SpecError(f"instances.neighbours: must be between 1 and n - 1, got {neighbours}")
     if side < 0:

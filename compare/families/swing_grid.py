@@ -44,7 +44,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..spec import SpecError, _check_keys, _list_of, _typed
+from ..parsing import SpecError, check_keys, list_of, typed
 from . import Family, register_family
 from .chain import actuated_nodes, parse_actuation
 
@@ -123,16 +123,16 @@ def swing_grid_instance(g: int, *, seed: int = 0, keep: float = 0.8, actuation: 
 
 
 def parse(table: dict, base=None) -> tuple:
-    _check_keys("instances", table, KEYS)
-    grids = _list_of("instances.grid", table.get("grid", [5]), int)
+    check_keys("instances", table, KEYS)
+    grids = list_of("instances.grid", table.get("grid", [5]), int)
     if any(g < 2 for g in grids):
         raise SpecError(f"instances.grid: a mesh needs g >= 2, got {list(grids)}")
-    count = _typed("instances.seeds", table.get("seeds", 1), int)
+    count = typed("instances.seeds", table.get("seeds", 1), int)
     if count < 1:
         raise SpecError(f"instances.seeds: a count must be >= 1, got {count}")
-    keep = _typed("instances.keep", table.get("keep", 0.8), float)
+    keep = typed("instances.keep", table.get("keep", 0.8), float)
     actuation, horizon = parse_actuation(table)
-    dt = _typed("instances.dt", table.get("dt", 0.2), float)
+    dt = typed("instances.dt", table.get("dt", 0.2), float)
     if not 0 < keep <= 1:
         raise SpecError(f"instances.keep: a probability in (0, 1], got {keep}")
     if not (math.isfinite(dt) and dt > 0):

@@ -47,7 +47,7 @@ from .statistics import Paired, best_within, paired_difference, panel_budgets
 from .styles import grnn_kinds
 
 __all__ = ["ARMS", "Decomposition", "Nonlinearity", "Divergence", "decompose", "nonlinearity", "divergence",
-           "decomposition_sentences", "decomposition_section", "plot_decomposition"]
+           "decomposition_sentences", "decomposition_section", "plot_decomposition", "undecomposed"]
 
 #: The arms, in order, and what each is.
 ARMS = {"paper": "shared readout, random start", "per-node": "per-node readout, random start",
@@ -67,7 +67,7 @@ def _arm(r) -> str | None:
         return "paper"
     if kinds == ["per_node"]:
         return "per-node"
-    if kinds == ["per_node", "warm_delayed"]:
+    if len(kinds) == 2 and kinds[0] == "per_node" and kinds[1].startswith("warm_"):
         return "warm"
     return None
 
@@ -99,6 +99,7 @@ class Decomposition:
     activation: str
     budget: float | None
     panels: int
+    instances: int  # the system's; each part pairs those where every arm has a design within the budget
     parts: dict  # part name -> Paired
     over_bound: dict  # arm ("paper", "per-node", "warm", "static") -> median excess over the SLS bound
 
@@ -157,22 +158,39 @@ def _tables(records: Records):
 def decompose(records) -> list[Decomposition]:
     """The decomposition on every system whose records hold the paper, per-node and warm arms and a static design."""
     out = []
-    for system, (_, budgets, tables, panels) in _tables(as_records(records)).items():
+    for system, (instances, budgets, tables, panels) in _tables(as_records(records)).items():
         for activation in ("tanh", "linear"):
             arms = {arm: tables.get((arm, activation)) for arm in ARMS}
             if any(t is None for t in arms.values()) or "static" not in tables:
                 continue
             arms["static"] = tables["static"]
             for j, budget in enumerate(budgets):
-                parts = {name: paired_difference(a, b, arms[a][:, j], arms[b][:, j], budget)
+                # One set of instances for every part: those where each arm has a design within the budget.
+                both = np.all([np.isfinite(t[:, j]) for t in arms.values()], axis=0)
+                parts = {name: paired_difference(a, b, arms[a][both, j], arms[b][both, j], budget)
                          for name, a, b in PARTS}
                 over = {}
                 if "bound" in tables:
                     for arm, t in arms.items():
-                        d = t[:, j] - tables["bound"]
+                        d = t[both, j] - tables["bound"][both]
                         d = d[np.isfinite(d)]
                         over[arm] = float(np.median(d)) if d.size else float("nan")
-                out.append(Decomposition(system, activation, budget, panels, parts, over))
+                out.append(Decomposition(system, activation, budget, panels, len(instances), parts, over))
+    return sorted(out, key=lambda d: -d.instances)  # the largest system first (a stable sort keeps the rest)
+
+
+def undecomposed(records) -> list[str]:
+    """Why a system with some of the arms has no decomposition: the arms without any usable design there."""
+    out = []
+    for system, (_, _, tables, _) in _tables(as_records(records)).items():
+        present = {key for key in tables if isinstance(key, tuple)}
+        if not present:
+            continue
+        for activation in ("tanh", "linear"):
+            missing = [arm for arm in ARMS if (arm, activation) not in tables]
+            if missing and any(key[1] == activation for key in present):
+                what = ", ".join(missing) + ("" if "static" in tables else "; no delayed static design")
+                out.append(f"{system_title(system)}, {activation}: no usable design of {what}")
     return out
 
 
@@ -214,16 +232,90 @@ def _budget(b) -> str:
 
 
 def _signed(p: Paired) -> str:
-    return f"{p.median:+.3f} {p.interval_text}"
+    return f"{p.median:+.4f} {p.interval_text}"
 
 
 def _pct(x: float) -> str:
     return "—" if not np.isfinite(x) else f"{100 * x:+.1f} %"
 
 
-def _headline(rows: Sequence[Decomposition]) -> Decomposition:
-    """The budget where the paper design's excess over the static design is largest (by its median)."""
-    return max(rows, key=lambda d: (d.parts["total"].median, d.budget is not None))
+_STARTS = {"delayed": "the delayed ℓ1 path's design", "diagonal": "the diagonal gain",
+           "auto": "the diagonal gain or a random draw (init auto)"}
+
+
+def _starts(records: Records, system: tuple) -> str:
+    """What the warm starts on ``system`` started from, in words."""
+    inits = sorted({str(r.params.get("init")) for r in records if _arm(r) == "warm" and _system(r) == system})
+    return " or ".join(_STARTS.get(i, i) for i in inits) or "a static design"
+
+
+def _count_phrase(d: Decomposition) -> str:
+    used = d.parts["total"].instances
+    pooled = f", {d.panels} panels pooled" if d.panels > 1 else ""
+    if used == d.instances:
+        return f"{d.instances} instances{pooled}"
+    return f"{used} of its {d.instances} instances, those where every arm has a design within the budget{pooled}"
+
+
+def _parts_sentence(records: Records, rows: Sequence[Decomposition]) -> str:
+    """The headline decomposition: with any number of links, and the tightest budget the warm start leaves open."""
+    d = next((r for r in rows if r.budget is None), rows[-1])
+    p = d.parts
+    name = "linear GRNN-Sparse" if d.activation == "linear" else "GRNN-Sparse"
+    text = (f"On {system_title(d.system)} ({_count_phrase(d)}), with {_budget(d.budget)} the paper's {name} costs "
+            f"{_signed(p['total'])} × LQR more than the best delayed static design (paired medians with 95 % "
+            f"intervals): its shared readout accounts for {_signed(p['model class'])} (against a per-node readout, "
+            f"both from random weights) and its random start for {_signed(p['training'])} (against the per-node one "
+            f"started from {_starts(records, d.system)}), which ends {_signed(p['remains'])} from the static design")
+    open_gap = [r for r in rows if r.budget is not None and r.parts["remains"].instances and r.parts["remains"].low > 0]
+    if open_gap:
+        g = open_gap[0]
+        text += (f"; within {g.budget:g} links the warm-started one still costs {_signed(g.parts['remains'])} more "
+                 f"({g.parts['remains'].instances} instances)")
+    return text + "."
+
+
+def _divergence_sentence(records: Records) -> str | None:
+    """Divergence from random weights against a warm start, on the system with the largest open-loop radius."""
+    div = [v for v in divergence(records) if v.radius is not None]
+    if not div:
+        return None
+    worst = max({v.system for v in div}, key=lambda s: next(v.radius for v in div if v.system == s))
+    here = [v for v in div if v.system == worst]
+    cold = [v for v in here if v.arm != "warm"]
+    warm = [v for v in here if v.arm == "warm"]
+    if not any(v.diverged_instances for v in cold):
+        return None
+    n = max(v.instances for v in here)
+    counts = ", ".join(f"{v.arm} {v.activation} {v.diverged_instances}" for v in cold)
+    text = (f"On {system_title(worst)} (open-loop spectral radius {here[0].radius:.2f}), GRNN-Sparse from random "
+            f"weights diverges at some β on up to {max(v.diverged_instances for v in cold)} of {n} instances "
+            f"({counts})")
+    if warm:
+        diverged = sum(v.diverged_instances for v in warm)
+        kept = sum(v.kept_starts for v in warm)
+        runs = sum(v.designs for v in warm)
+        text += (f"; started from {_starts(records, worst)} it diverges on "
+                 f"{'none' if not diverged else f'{diverged} instance-arms'}, keeping its start in {kept} of {runs} runs")
+    return text + "."
+
+
+def _nonlinearity_sentence(records: Records, system: tuple) -> str | None:
+    nl = [x for x in nonlinearity(records) if x.system == system and x.arm == "paper" and x.paired.instances]
+    if not nl:
+        return None
+    helps = [x for x in nl if x.paired.high < 0]
+    hurts = [x for x in nl if x.paired.low > 0]
+    span = f"{min(x.paired.median for x in nl):+.4f} to {max(x.paired.median for x in nl):+.4f}"
+    if helps:
+        verdict = (f"the tanh nonlinearity lowers the cost at {', '.join(_budget(x.budget) for x in helps)} "
+                   f"(tanh − linear medians {span} across budgets)")
+    elif hurts:
+        verdict = (f"the tanh nonlinearity adds nothing: at {', '.join(_budget(x.budget) for x in hurts)} the "
+                   f"linear GRNN-Sparse costs less (tanh − linear medians {span} across budgets)")
+    else:
+        verdict = f"tanh and linear GRNN-Sparse cannot be told apart (tanh − linear medians {span}, every interval holding 0)"
+    return f"At equal information and equal links on {system_title(system)}, {verdict}."
 
 
 def decomposition_sentences(records) -> list[str]:
@@ -232,50 +324,14 @@ def decomposition_sentences(records) -> list[str]:
     rows = decompose(records)
     if not rows:
         return []
-    sentences = []
-    by_system = {}
+    by_system: dict = {}
     for d in rows:
         by_system.setdefault(d.system, []).append(d)
-    system = max(by_system, key=lambda s: (by_system[s][0].parts["total"].instances, str(s)))
+    system = max(by_system, key=lambda s: (by_system[s][0].instances, str(s)))
     tanh = [d for d in by_system[system] if d.activation == "tanh"] or by_system[system]
-    d = _headline(tanh)
-    p = d.parts
-    sentences.append(
-        f"On {system_title(system)} ({p['total'].instances} instances{', ' + str(d.panels) + ' panels pooled' if d.panels > 1 else ''}), "
-        f"at {_budget(d.budget)} the paper's {'linear ' if d.activation == 'linear' else ''}GRNN-Sparse costs "
-        f"{_signed(p['total'])} × LQR more than the best delayed static design (median, 95 % interval, paired): "
-        f"the shared readout accounts for {_signed(p['model class'])} (against a per-node readout, both from random "
-        f"weights), the random start for {_signed(p['training'])} (against a warm start from the delayed ℓ1 path), "
-        f"and the warm-started per-node GRNN-Sparse ends {_signed(p['remains'])} from the static design.")
-    div = [v for v in divergence(records) if v.radius is not None]
-    if div:
-        worst = max({v.system for v in div}, key=lambda s: next(v.radius for v in div if v.system == s))
-        here = [v for v in div if v.system == worst]
-        cold = [v for v in here if v.arm != "warm"]
-        warm = [v for v in here if v.arm == "warm"]
-        if any(v.diverged_instances for v in cold) or warm:
-            cold_text = "; ".join(f"{v.arm} {v.activation} on {v.diverged_instances} of {v.instances}" for v in cold)
-            warm_text = "; ".join(f"{v.activation} on {v.diverged_instances} of {v.instances} (start kept in "
-                                  f"{v.kept_starts} of {v.designs} runs)" for v in warm)
-            sentences.append(
-                f"On {system_title(worst)} (open-loop spectral radius {here[0].radius:.2f}), GRNN-Sparse from random "
-                f"weights diverges on some of its settings ({cold_text} instances)"
-                + (f", and from the delayed ℓ1 start ({warm_text})." if warm else "."))
-    nl = [x for x in nonlinearity(records) if x.system == system and x.arm == "paper"]
-    if nl:
-        helps = [x for x in nl if x.paired.high < 0]
-        hurts = [x for x in nl if x.paired.low > 0]
-        span = f"{min(x.paired.median for x in nl):+.4f} to {max(x.paired.median for x in nl):+.4f}"
-        if helps:
-            verdict = (f"the tanh nonlinearity lowers the cost at {', '.join(_budget(x.budget) for x in helps)} "
-                       f"(medians {span} across budgets)")
-        elif hurts:
-            verdict = (f"the tanh nonlinearity adds nothing: at {', '.join(_budget(x.budget) for x in hurts)} the "
-                       f"linear GRNN-Sparse costs less (tanh − linear medians {span} across budgets)")
-        else:
-            verdict = f"tanh and linear GRNN-Sparse cannot be told apart (tanh − linear medians {span}, every interval holding 0)"
-        sentences.append(f"At equal information and equal links on {system_title(system)}, {verdict}.")
-    return sentences
+    sentences = [_parts_sentence(records, tanh), _divergence_sentence(records),
+                 _nonlinearity_sentence(records, system)]
+    return [x for x in sentences if x]
 
 
 def _interval_cell(p: Paired) -> str:
@@ -297,26 +353,35 @@ def decomposition_section(records, save=None) -> list[str]:
         "Per instance and link budget, the paper's GRNN-Sparse (shared readout, random start) against the best "
         "delayed static design (the same information: own state now, neighbours' one step late) splits as "
         "*total* = *model class* (paper − per-node readout, both from random weights) + *training* (per-node from "
-        "random − per-node warm-started from the delayed ℓ1 path's design nearest its β) + *what remains* (warm − "
-        "static). Each entry is a paired difference of LQR-normalized best costs within the budget: its median over "
-        "instances with a distribution-free 95 % interval (positive: the first costs more). Medians do not add, so "
-        "the parts need not sum to the total. A per-node readout holds every delayed static gain exactly "
+        "random − per-node warm-started from a static design on its instance: the delayed ℓ1 path's design at "
+        "γ = β / trace(P), or the diagonal gain) + *what remains* (warm − static). Each entry is a paired difference "
+        "of LQR-normalized best costs within the budget: its median over the instances where every arm has a design "
+        "within the budget (the column *instances*), with a distribution-free 95 % interval (positive: the first costs "
+        "more; a percentage after it is the interval's coverage where too few instances allow 95 %). Medians do not "
+        "add, so the parts need not sum to the total. A per-node readout holds every delayed static gain exactly "
         "(docs/methods.md), so a positive *remains* is what training from the static design's own closed loop could "
         "not recover at that budget, and a negative one what the dynamic controller adds.", ""]
     for system in dict.fromkeys(d.system for d in rows):
         here = [d for d in rows if d.system == system]
-        n = here[0].parts["total"].instances
-        lines += [f"### {system_title(system)} ({n} instances{f', {here[0].panels} panels pooled' if here[0].panels > 1 else ''})", "",
-                  "| activation | budget | total | model class | training | remains |", "|---|---|---:|---:|---:|---:|"]
-        lines += [f"| {d.activation} | {_budget(d.budget)} | " + " | ".join(_interval_cell(d.parts[name]) for name, *_ in PARTS)
-                  + " |" for d in here]
+        pooled = f", {here[0].panels} panels pooled" if here[0].panels > 1 else ""
+        lines += [f"### {system_title(system)} ({here[0].instances} instances{pooled}; warm starts from "
+                  f"{_starts(records, system)})", "",
+                  "| activation | budget | instances | total | model class | training | remains |",
+                  "|---|---|---:|---:|---:|---:|---:|"]
+        lines += [f"| {d.activation} | {_budget(d.budget)} | {d.parts['total'].instances} | "
+                  + " | ".join(_interval_cell(d.parts[name]) for name, *_ in PARTS) + " |" for d in here]
         if any(d.over_bound for d in here):
-            lines += ["", "Median excess over the SLS bound (complete graph, one hop per step), in per cent of LQR's cost:", "",
+            lines += ["", "Median excess over the SLS bound (complete graph, one hop per step), in per cent of LQR's cost, "
+                      "on the same instances:", "",
                       "| activation | budget | paper | per-node | warm | best delayed static |", "|---|---|---:|---:|---:|---:|"]
             lines += [f"| {d.activation} | {_budget(d.budget)} | "
                       + " | ".join(_pct(d.over_bound.get(arm, np.nan)) for arm in ("paper", "per-node", "warm", "static"))
                       + " |" for d in here]
         lines.append("")
+    missing = undecomposed(records)
+    if missing:
+        lines += ["Not decomposed (an arm without any usable design on the system, see the divergence table):", ""]
+        lines += [f"- {m}" for m in missing] + [""]
     nl = nonlinearity(records)
     if nl:
         lines += ["### tanh against linear at equal information and links", "",
@@ -348,7 +413,7 @@ _PART_MARKERS = {"total": "o", "model class": "s", "training": "^", "remains": "
 def plot_decomposition(rows: Sequence[Decomposition], *, axes=None):
     """The parts of each system's decomposition against the budget: medians with their 95 % intervals.
 
-    One column per system and activation; each budget a group of four bars (total, model
+    One row of panels per system, one panel per activation; each budget a group of four bars (total, model
     class, training, what remains), every one a paired median difference with its
     interval, the quantities the tables and the answer state.
 
@@ -359,10 +424,19 @@ def plot_decomposition(rows: Sequence[Decomposition], *, axes=None):
     import matplotlib.pyplot as plt
 
     columns = list(dict.fromkeys((d.system, d.activation) for d in rows))
-    if axes is None:
-        fig, axes = plt.subplots(1, len(columns), figsize=(max(4.5, 3.6 * len(columns)), 3.6), sharey=True,
-                                 squeeze=False)
-        axes = list(axes[0])
+    if axes is None:  # a row per system, its activations side by side: two panels across read at 800 px
+        systems = list(dict.fromkeys(d.system for d in rows))
+        across = max(sum(1 for c in columns if c[0] == s) for s in systems)
+        fig, grid = plt.subplots(len(systems), across, figsize=(4.2 * across + 0.8, 3.2 * len(systems)),
+                                 sharey=True, squeeze=False)
+        place = {}
+        for i, system in enumerate(systems):
+            for j, column in enumerate(c for c in columns if c[0] == system):
+                place[column] = grid[i][j]
+        for ax in grid.flat:
+            if ax not in place.values():
+                ax.set_visible(False)
+        axes = [place[c] for c in columns]
     else:
         fig = axes[0].figure
     width = 0.18
@@ -384,9 +458,14 @@ def plot_decomposition(rows: Sequence[Decomposition], *, axes=None):
         ax.axhline(0.0, color="0.5", linewidth=0.8)
         ax.set_xticks(range(len(here)), ["any" if d.budget is None else f"≤ {d.budget:g}" for d in here])
         ax.set_xlabel("link budget")
-        ax.set_title(f"{system_title(system)}, {activation}", fontsize=9)
+        few = min((d.parts["total"] for d in here if d.parts["total"].instances), key=lambda q: q.coverage, default=None)
+        cover = f", {few.coverage:.0%} intervals" if few is not None and few.too_few else ""
+        ax.set_title(f"{system_title(system)}, {activation} ({here[0].instances} instances{cover})", fontsize=9)
         ax.grid(axis="y", alpha=0.3)
-    axes[0].set_ylabel("paired difference (× LQR)")
+    for ax in axes:
+        spec = ax.get_subplotspec()
+        if spec is None or spec.colspan.start == 0:
+            ax.set_ylabel("paired difference (× LQR)")
     axes[0].legend(fontsize=8, loc="best")
     fig.tight_layout()
     return fig, axes

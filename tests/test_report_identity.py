@@ -10,7 +10,8 @@ import pytest
 from compare.styles import METHOD_STYLES, style_for
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
-SHIPPED = ("quick", "scale", "systems", "table1", "tradeoff", "small", "benchmark-systems", "scale-large", "power")
+SHIPPED = ("quick", "scale", "systems", "table1", "tradeoff", "small", "benchmark-systems", "scale-large", "power",
+           "learned-class")
 
 
 def _label_kinds(folder: Path) -> dict:

@@ -1,0 +1,392 @@
+"""Why a learned design loses: its excess over the best delayed static design, in model class and training.
+
+A GRNN-Sparse design with the paper's settings (one readout shared by every node, weights
+drawn at random) costs more than the best static gain with the same information (own state
+now, neighbours' one step late) on the paper's family (docs/methods.md, "What the GRNN can
+represent"). Two reasons are possible: the model class (a shared readout cannot give two
+nodes different local gains, while a per-node readout contains every delayed static gain)
+and the training (a random start, far from a stabilizing controller). A report whose
+records hold three kinds of GRNN-Sparse design of one activation,
+
+- **paper**: shared readout, random start;
+- **per-node**: per-node readout, random start;
+- **warm**: per-node readout started from a delayed static design (``init = "delayed"``),
+
+beside the delayed static designs, splits, per instance and link budget (each arm's best
+cost within the budget, LQR-normalized),
+
+    paper − static = (paper − per-node) + (per-node − warm) + (warm − static)
+                   =   model class       +   training        +   what remains
+
+where *static* is the best delayed static design on the instance within the budget (the
+ℓ1 path's, or an exact-budget search's). Each part is a paired difference over instances
+(:func:`compare.report.statistics.paired_difference`): its median with a distribution-free 95 %
+interval. Medians do not add, so the parts' medians need not sum to the total's. Panels
+of one family and size (the paper family's five ‖A‖₂) are pooled: every difference is
+taken within its own instance, so the pooled differences are paired as the panels' are.
+
+Beside it: each arm's excess over the SLS bound (the best cost any controller with the
+delayed information reaches on its instance, whatever its links); tanh against linear at
+equal information and links, per kind; and divergence, per system and arm: instances on
+which some design diverged (every ensemble member's training), and, for warm starts, runs
+whose training diverged or ended above the start, where the start was kept.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from codesign.status import DIVERGED
+
+from .findings import is_sls_bound, is_unresolved
+from ..run.records import Records, as_records
+from .statistics import Paired, best_within, paired_difference, panel_budgets
+from .styles import grnn_kinds
+
+__all__ = ["ARMS", "Decomposition", "Nonlinearity", "Divergence", "decompose", "nonlinearity", "divergence",
+           "decomposition_sentences", "decomposition_section", "plot_decomposition"]
+
+#: The arms, in order, and what each is.
+ARMS = {"paper": "shared readout, random start", "per-node": "per-node readout, random start",
+        "warm": "per-node readout, warm start from a delayed static design"}
+#: The parts of the paper design's excess over the static one: (name, minuend arm, subtrahend arm).
+PARTS = (("total", "paper", "static"), ("model class", "paper", "per-node"), ("training", "per-node", "warm"),
+         ("remains", "warm", "static"))
+_LEARNED = ("grnn", "grnn_sparse", "grnn_dense", "grnn_fixed", "gcnn")
+
+
+def _arm(r) -> str | None:
+    """Which arm a design belongs to, or None."""
+    if r.method != "grnn_sparse":
+        return None
+    kinds = grnn_kinds(r.method, r.params)
+    if not kinds:
+        return "paper"
+    if kinds == ["per_node"]:
+        return "per-node"
+    if kinds == ["per_node", "warm_delayed"]:
+        return "warm"
+    return None
+
+
+def _activation(r) -> str:
+    return "linear" if r.params.get("activation") == "identity" else "tanh"
+
+
+def _is_static_delayed(r) -> bool:
+    return (r.info_model == "delayed" and r.method not in _LEARNED and not r.method.startswith("sls")
+            and not is_sls_bound(r))
+
+
+def _system(r) -> tuple:
+    """Panels pooled into one system: a family at one size."""
+    return (r.instance.family, r.instance.nodes)
+
+
+def system_title(system: tuple) -> str:
+    family, n = system
+    return f"{family}, N = {n}" if n is not None else str(family)
+
+
+@dataclass(frozen=True)
+class Decomposition:
+    """The parts of one activation's paper-design excess on one system within one budget."""
+
+    system: tuple
+    activation: str
+    budget: float | None
+    panels: int
+    parts: dict  # part name -> Paired
+    over_bound: dict  # arm ("paper", "per-node", "warm", "static") -> median excess over the SLS bound
+
+
+@dataclass(frozen=True)
+class Nonlinearity:
+    """tanh − linear for one kind of GRNN-Sparse on one system within one budget."""
+
+    system: tuple
+    arm: str
+    budget: float | None
+    paired: Paired
+
+
+@dataclass(frozen=True)
+class Divergence:
+    """How often one arm diverged on one system."""
+
+    system: tuple
+    arm: str
+    activation: str
+    instances: int
+    diverged_instances: int  # instances with a design whose training diverged in every member
+    designs: int
+    diverged_designs: int
+    kept_starts: int  # warm runs whose training diverged or ended above the start (the start kept)
+    radius: float | None  # median open-loop spectral radius of the system's instances
+
+
+def _usable(records: Records) -> Records:
+    return records.filter(lambda r: r.ok and not is_unresolved(r))
+
+
+def _tables(records: Records):
+    """Per system: (instances, budgets, {(arm, activation) or "static" or "bound": best-within table})."""
+    out = {}
+    for system, rs in sorted(records.group(_system).items(), key=lambda kv: tuple(map(str, kv[0]))):
+        instances = sorted(rs.by_instance)
+        budgets = tuple(panel_budgets(rs))
+        grid = [np.inf if b is None else b for b in budgets]
+        usable = _usable(rs)
+        tables = {}
+        for key, arm_rs in usable.group(lambda r: (_arm(r), _activation(r))).items():
+            if key[0] is not None:
+                tables[key] = best_within(arm_rs, instances, grid)
+        static = usable.filter(_is_static_delayed)
+        if len(static):
+            tables["static"] = best_within(static, instances, grid)
+        bound = usable.filter(is_sls_bound)
+        if len(bound):
+            tables["bound"] = best_within(bound, instances, [np.inf])[:, 0]
+        out[system] = (instances, budgets, tables, len(rs.by_panel))
+    return out
+
+
+def decompose(records) -> list[Decomposition]:
+    """The decomposition on every system whose records hold the paper, per-node and warm arms and a static design."""
+    out = []
+    for system, (_, budgets, tables, panels) in _tables(as_records(records)).items():
+        for activation in ("tanh", "linear"):
+            arms = {arm: tables.get((arm, activation)) for arm in ARMS}
+            if any(t is None for t in arms.values()) or "static" not in tables:
+                continue
+            arms["static"] = tables["static"]
+            for j, budget in enumerate(budgets):
+                parts = {name: paired_difference(a, b, arms[a][:, j], arms[b][:, j], budget)
+                         for name, a, b in PARTS}
+                over = {}
+                if "bound" in tables:
+                    for arm, t in arms.items():
+                        d = t[:, j] - tables["bound"]
+                        d = d[np.isfinite(d)]
+                        over[arm] = float(np.median(d)) if d.size else float("nan")
+                out.append(Decomposition(system, activation, budget, panels, parts, over))
+    return out
+
+
+def nonlinearity(records) -> list[Nonlinearity]:
+    """tanh − linear GRNN-Sparse per kind, system and budget (negative: the nonlinearity helps)."""
+    out = []
+    for system, (_, budgets, tables, _) in _tables(as_records(records)).items():
+        for arm in ARMS:
+            tanh, linear = tables.get((arm, "tanh")), tables.get((arm, "linear"))
+            if tanh is None or linear is None:
+                continue
+            out += [Nonlinearity(system, arm, b, paired_difference(f"{arm} tanh", f"{arm} linear", tanh[:, j],
+                                                                   linear[:, j], b)) for j, b in enumerate(budgets)]
+    return out
+
+
+def divergence(records) -> list[Divergence]:
+    """Divergence of every arm on every system (all designs, usable or not)."""
+    out = []
+    for system, rs in sorted(as_records(records).group(_system).items(), key=lambda kv: tuple(map(str, kv[0]))):
+        radii = [i.radius for i in rs.instances if i.radius is not None]
+        radius = float(np.median(radii)) if radii else None
+        for (arm, activation), arm_rs in sorted(rs.group(lambda r: (_arm(r), _activation(r))).items(),
+                                                key=lambda kv: (str(kv[0][0]), kv[0][1])):
+            if arm is None:
+                continue
+            diverged = arm_rs.filter(lambda r: r.status == DIVERGED)
+            kept = sum(bool(r.extras.get("kept_start")) for r in arm_rs)
+            out.append(Divergence(system, arm, activation, len(arm_rs.by_instance), len(diverged.by_instance),
+                                  len(arm_rs), len(diverged), kept, radius))
+    return out
+
+
+# --------------------------------------------------------------------------- wording
+
+
+def _budget(b) -> str:
+    return "any number of links" if b is None else f"≤ {b:g} links"
+
+
+def _signed(p: Paired) -> str:
+    return f"{p.median:+.3f} {p.interval_text}"
+
+
+def _pct(x: float) -> str:
+    return "—" if not np.isfinite(x) else f"{100 * x:+.1f} %"
+
+
+def _headline(rows: Sequence[Decomposition]) -> Decomposition:
+    """The budget where the paper design's excess over the static design is largest (by its median)."""
+    return max(rows, key=lambda d: (d.parts["total"].median, d.budget is not None))
+
+
+def decomposition_sentences(records) -> list[str]:
+    """At most three sentences: the decomposition, divergence with and without a warm start, the nonlinearity."""
+    records = as_records(records)
+    rows = decompose(records)
+    if not rows:
+        return []
+    sentences = []
+    by_system = {}
+    for d in rows:
+        by_system.setdefault(d.system, []).append(d)
+    system = max(by_system, key=lambda s: (by_system[s][0].parts["total"].instances, str(s)))
+    tanh = [d for d in by_system[system] if d.activation == "tanh"] or by_system[system]
+    d = _headline(tanh)
+    p = d.parts
+    sentences.append(
+        f"On {system_title(system)} ({p['total'].instances} instances{', ' + str(d.panels) + ' panels pooled' if d.panels > 1 else ''}), "
+        f"at {_budget(d.budget)} the paper's {'linear ' if d.activation == 'linear' else ''}GRNN-Sparse costs "
+        f"{_signed(p['total'])} × LQR more than the best delayed static design (median, 95 % interval, paired): "
+        f"the shared readout accounts for {_signed(p['model class'])} (against a per-node readout, both from random "
+        f"weights), the random start for {_signed(p['training'])} (against a warm start from the delayed ℓ1 path), "
+        f"and the warm-started per-node GRNN-Sparse ends {_signed(p['remains'])} from the static design.")
+    div = [v for v in divergence(records) if v.radius is not None]
+    if div:
+        worst = max({v.system for v in div}, key=lambda s: next(v.radius for v in div if v.system == s))
+        here = [v for v in div if v.system == worst]
+        cold = [v for v in here if v.arm != "warm"]
+        warm = [v for v in here if v.arm == "warm"]
+        if any(v.diverged_instances for v in cold) or warm:
+            cold_text = "; ".join(f"{v.arm} {v.activation} on {v.diverged_instances} of {v.instances}" for v in cold)
+            warm_text = "; ".join(f"{v.activation} on {v.diverged_instances} of {v.instances} (start kept in "
+                                  f"{v.kept_starts} of {v.designs} runs)" for v in warm)
+            sentences.append(
+                f"On {system_title(worst)} (open-loop spectral radius {here[0].radius:.2f}), GRNN-Sparse from random "
+                f"weights diverges on some of its settings ({cold_text} instances)"
+                + (f", and from the delayed ℓ1 start ({warm_text})." if warm else "."))
+    nl = [x for x in nonlinearity(records) if x.system == system and x.arm == "paper"]
+    if nl:
+        helps = [x for x in nl if x.paired.high < 0]
+        hurts = [x for x in nl if x.paired.low > 0]
+        span = f"{min(x.paired.median for x in nl):+.4f} to {max(x.paired.median for x in nl):+.4f}"
+        if helps:
+            verdict = (f"the tanh nonlinearity lowers the cost at {', '.join(_budget(x.budget) for x in helps)} "
+                       f"(medians {span} across budgets)")
+        elif hurts:
+            verdict = (f"the tanh nonlinearity adds nothing: at {', '.join(_budget(x.budget) for x in hurts)} the "
+                       f"linear GRNN-Sparse costs less (tanh − linear medians {span} across budgets)")
+        else:
+            verdict = f"tanh and linear GRNN-Sparse cannot be told apart (tanh − linear medians {span}, every interval holding 0)"
+        sentences.append(f"At equal information and equal links on {system_title(system)}, {verdict}.")
+    return sentences
+
+
+def _interval_cell(p: Paired) -> str:
+    return "—" if not p.instances else f"{p.median:+.4f} {p.interval_text}"
+
+
+def decomposition_section(records, save=None) -> list[str]:
+    """The report section: tables of the parts, the excess over the bound, the nonlinearity and divergence."""
+    records = as_records(records)
+    rows = decompose(records)
+    if not rows:
+        return []
+    lines = ["## Why the learned designs lose: model class against training", ""]
+    if save is not None:
+        fig, _ = plot_decomposition(rows)
+        save(fig, "decomposition")
+        lines += ["![decomposition](decomposition.png)", ""]
+    lines += [
+        "Per instance and link budget, the paper's GRNN-Sparse (shared readout, random start) against the best "
+        "delayed static design (the same information: own state now, neighbours' one step late) splits as "
+        "*total* = *model class* (paper − per-node readout, both from random weights) + *training* (per-node from "
+        "random − per-node warm-started from the delayed ℓ1 path's design nearest its β) + *what remains* (warm − "
+        "static). Each entry is a paired difference of LQR-normalized best costs within the budget: its median over "
+        "instances with a distribution-free 95 % interval (positive: the first costs more). Medians do not add, so "
+        "the parts need not sum to the total. A per-node readout holds every delayed static gain exactly "
+        "(docs/methods.md), so a positive *remains* is what training from the static design's own closed loop could "
+        "not recover at that budget, and a negative one what the dynamic controller adds.", ""]
+    for system in dict.fromkeys(d.system for d in rows):
+        here = [d for d in rows if d.system == system]
+        n = here[0].parts["total"].instances
+        lines += [f"### {system_title(system)} ({n} instances{f', {here[0].panels} panels pooled' if here[0].panels > 1 else ''})", "",
+                  "| activation | budget | total | model class | training | remains |", "|---|---|---:|---:|---:|---:|"]
+        lines += [f"| {d.activation} | {_budget(d.budget)} | " + " | ".join(_interval_cell(d.parts[name]) for name, *_ in PARTS)
+                  + " |" for d in here]
+        if any(d.over_bound for d in here):
+            lines += ["", "Median excess over the SLS bound (complete graph, one hop per step), in per cent of LQR's cost:", "",
+                      "| activation | budget | paper | per-node | warm | best delayed static |", "|---|---|---:|---:|---:|---:|"]
+            lines += [f"| {d.activation} | {_budget(d.budget)} | "
+                      + " | ".join(_pct(d.over_bound.get(arm, np.nan)) for arm in ("paper", "per-node", "warm", "static"))
+                      + " |" for d in here]
+        lines.append("")
+    nl = nonlinearity(records)
+    if nl:
+        lines += ["### tanh against linear at equal information and links", "",
+                  "tanh − linear, each kind of GRNN-Sparse with the same training (negative: the nonlinearity helps).", "",
+                  "| system | kind | budget | tanh − linear |", "|---|---|---|---:|"]
+        lines += [f"| {system_title(x.system)} | {x.arm} | {_budget(x.budget)} | {_interval_cell(x.paired)} |" for x in nl]
+        lines.append("")
+    div = divergence(records)
+    if div:
+        lines += ["### Divergence with and without a stable start", "",
+                  "Instances on which some design of the arm diverged (every ensemble member's training), the designs "
+                  "that did, and for warm starts the runs that kept their start (training diverged or ended above it).", "",
+                  "| system | open-loop radius | arm | activation | instances diverged | designs diverged | starts kept |",
+                  "|---|---:|---|---|---:|---:|---:|"]
+        lines += [f"| {system_title(v.system)} | {'—' if v.radius is None else f'{v.radius:.2f}'} | {v.arm} | {v.activation} | "
+                  f"{v.diverged_instances} of {v.instances} | {v.diverged_designs} of {v.designs} | "
+                  f"{v.kept_starts if v.arm == 'warm' else '—'} |" for v in div]
+        lines.append("")
+    return lines
+
+
+# --------------------------------------------------------------------------- figure
+
+
+_PART_COLOURS = {"total": "#332288", "model class": "#CC6677", "training": "#117733", "remains": "#999933"}
+_PART_MARKERS = {"total": "o", "model class": "s", "training": "^", "remains": "D"}
+
+
+def plot_decomposition(rows: Sequence[Decomposition], *, axes=None):
+    """The parts of each system's decomposition against the budget: medians with their 95 % intervals.
+
+    One column per system and activation; each budget a group of four bars (total, model
+    class, training, what remains), every one a paired median difference with its
+    interval, the quantities the tables and the answer state.
+
+    Returns
+    -------
+    (Figure, list of Axes)
+    """
+    import matplotlib.pyplot as plt
+
+    columns = list(dict.fromkeys((d.system, d.activation) for d in rows))
+    if axes is None:
+        fig, axes = plt.subplots(1, len(columns), figsize=(max(4.5, 3.6 * len(columns)), 3.6), sharey=True,
+                                 squeeze=False)
+        axes = list(axes[0])
+    else:
+        fig = axes[0].figure
+    width = 0.18
+    for ax, (system, activation) in zip(axes, columns):
+        here = [d for d in rows if d.system == system and d.activation == activation]
+        for k, (name, *_) in enumerate(PARTS):
+            xs, ys, lo, hi = [], [], [], []
+            for j, d in enumerate(here):
+                p = d.parts[name]
+                if not p.instances:
+                    continue
+                xs.append(j + (k - 1.5) * width)
+                ys.append(p.median)
+                lo.append(p.median - p.low)
+                hi.append(p.high - p.median)
+            drawn = ax.errorbar(xs, ys, yerr=[lo, hi], fmt=_PART_MARKERS[name], color=_PART_COLOURS[name],
+                                capsize=2, markersize=5, linewidth=1.2, label=name if ax is axes[0] else None)
+            drawn.lines[0].set_gid(f"decomposition:{name}")  # read back by the tests
+        ax.axhline(0.0, color="0.5", linewidth=0.8)
+        ax.set_xticks(range(len(here)), ["any" if d.budget is None else f"≤ {d.budget:g}" for d in here])
+        ax.set_xlabel("link budget")
+        ax.set_title(f"{system_title(system)}, {activation}", fontsize=9)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].set_ylabel("paired difference (× LQR)")
+    axes[0].legend(fontsize=8, loc="best")
+    fig.tight_layout()
+    return fig, axes

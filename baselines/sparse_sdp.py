@@ -28,7 +28,7 @@ then has blocks K_ij = Y_ij X_j⁻¹, so Y's node-block pattern is K's, as with
 the diagonal X; a block-diagonal X costs no sparsity (links are counted between
 nodes, and a node's own block is free), while a diagonal X is needlessly
 conservative, even infeasible: on the mass-spring chain
-(:mod:`compare.families.mass_spring`) a node's position and velocity need a
+(:mod:`compare.run.families.mass_spring`) a node's position and velocity need a
 cross-covariance, and the diagonal-X SDP has no solution. The smooth term
 splits by node and by row of R^{½}Y into matrix-fractional terms
 (R^{½}Y)_{k,j} X_j⁻¹ (R^{½}Y)_{k,j}', each a (p_j + 1) × (p_j + 1) Schur cone
@@ -86,7 +86,7 @@ from ._sparse import DecentralizedCache, check_gammas, design_on_pattern, with_d
 __all__ = ["sparse_sdp", "SparseSDP", "SDP_GAMMAS", "SDP_MAX_STATES", "SDP_SOLVERS", "default_solver"]
 
 #: Packages whose version enters this method's code fingerprint besides the common ones
-#: (:mod:`compare.fingerprint`): a new SCS can move a pattern, so it reruns the paths.
+#: (:mod:`compare.run.fingerprint`): a new SCS can move a pattern, so it reruns the paths.
 FINGERPRINT_PACKAGES = ("scs",)
 
 #: The solvers a path can use (the ``solver`` hyperparameter, whose default ``"auto"`` is

@@ -37,7 +37,7 @@ def main():
     args = parser.parse_args()
     from distributed import Client, LocalCluster
 
-    from compare.execution import limit_threads
+    from compare.run.execution import limit_threads
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         with Client(cluster) as client:

@@ -34,7 +34,7 @@ import numpy as np
 from codesign import paper_instance
 from codesign.learned import grnn_batch
 from codesign.status import DIVERGED, USABLE
-from compare.families.random_network import random_network_instance
+from compare.run.families.random_network import random_network_instance
 
 FAMILIES = ("random_network", "paper_1.2")
 #: GRNN-Sparse's l1 weight: the middle of the systems report's grid (random network), and of the trade-off

@@ -113,7 +113,7 @@ class Design:
     def ok(self) -> bool:
         """True when the design's cost counts: a :data:`~codesign.status.USABLE` status and a finite cost.
 
-        The same meaning as :attr:`compare.records.DesignRecord.ok`.
+        The same meaning as :attr:`compare.run.records.DesignRecord.ok`.
         """
         return self.status in USABLE and bool(np.isfinite(self.cost))
 

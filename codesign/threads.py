@@ -6,7 +6,7 @@ on arrays too small to share out, as a rollout of a learned controller does at e
 step, the threads of the idle pool spin-wait on the cores the busy one needs, and the
 loop slows down by up to an order of magnitude (measured on 2 cores:
 ``benchmarks/bench_rollout_threads.py``). The harness's workers run every pool at one
-thread already (``compare.execution``); :func:`one_torch_thread` gives a notebook the
+thread already (``compare.run.execution``); :func:`one_torch_thread` gives a notebook the
 same speed and gives the pool back after. Elementwise results do not depend on the
 pool size.
 """

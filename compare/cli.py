@@ -77,7 +77,7 @@ def _check_writable(path: Path, option: str = "--out") -> None:
 
 
 def _open_store(path: Path, *, create: bool = True):
-    from .store import Store, StoreError
+    from .run.store import Store, StoreError
 
     try:
         return Store(path, create=create)
@@ -90,7 +90,7 @@ def _open_store(path: Path, *, create: bool = True):
 @contextmanager
 def _reading_store(path: Path):
     """An existing store opened for ``compare report`` or ``export``; a store fault while reading exits 2."""
-    from .store import StoreError
+    from .run.store import StoreError
 
     with _open_store(path, create=False) as store:
         try:
@@ -122,7 +122,7 @@ def _interrupt_on_sigterm():
 @contextmanager
 def _store_for_run(path: Path):
     """The store a run writes; one this command created is removed again if the command fails before any run."""
-    from .store import StoreError
+    from .run.store import StoreError
 
     created = not path.exists()
     store = _open_store(path)
@@ -142,7 +142,7 @@ def _store_for_run(path: Path):
 
 def _preset_names() -> list[str]:
     """The shipped presets, read from the package folder (no spec parsing, no method imports)."""
-    folder = resources.files("compare") / "presets"
+    folder = resources.files("compare.run") / "presets"
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
@@ -158,8 +158,8 @@ class _RunCommand(click.Command):
 def _report(records, out: Path, *, meta: dict, members: dict, superseded: int, load_controller,
             software: dict | None = None) -> dict:
     """Write the report of ``records`` into ``out``: titles, specs and commands come from ``meta``."""
-    from .meta import MetaError, StoreMeta
-    from .report import write_report
+    from .report.write import write_report
+    from .run.meta import MetaError, StoreMeta
 
     try:
         store_meta = StoreMeta.parse(meta)
@@ -186,14 +186,14 @@ def _write_report(store, out: Path) -> dict:
 
 
 def _write_report_from_folder(data, out: Path) -> dict:
-    """The report of a :class:`compare.folder.FolderData`, with the software versions it recorded."""
+    """The report of a :class:`compare.report.folder.FolderData`, with the software versions it recorded."""
     return _report(data.records, out, meta=data.meta, members=data.members, superseded=data.superseded,
                    load_controller=data.load_controller, software=data.software)
 
 
 def _rebuild_from_folder(out: Path) -> dict:
     """Rebuild the report of a folder from its runs.csv, curves.csv and report.json; bad files exit 2."""
-    from .folder import FolderError, read_folder
+    from .report.folder import FolderError, read_folder
 
     try:
         data = read_folder(out)
@@ -284,10 +284,10 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
         _check_folder(out)
     if store_path is not None:
         _check_file(store_path)
-    from .meta import MetaKind, meta_key
-    from .runner import ExecutorError, StoreBusy, open_executor, run_experiment
-    from .spec import SpecError, load_spec
-    from .store import StoreError
+    from .run.meta import MetaKind, meta_key
+    from .run.runner import ExecutorError, StoreBusy, open_executor, run_experiment
+    from .run.spec import SpecError, load_spec
+    from .run.store import StoreError
 
     try:
         spec = load_spec(experiment, plugins=plugins)
@@ -368,7 +368,7 @@ def export(out, store_path, report_dir, fmt):
     is `Store(path).to_pandas()` in Python. Needs the optional extra:
     pip install -e ".[analysis]".
     """
-    from .export import FORMATS, MissingExtra, require_pandas
+    from .run.export import FORMATS, MissingExtra, require_pandas
 
     if fmt not in FORMATS:
         raise UserError(f"--format: unknown format {fmt!r} (known: {', '.join(FORMATS)})")
@@ -392,7 +392,7 @@ def export(out, store_path, report_dir, fmt):
         require_pandas(fmt)
     except MissingExtra as exc:
         raise UserError(str(exc)) from None
-    from .export import write_designs
+    from .run.export import write_designs
 
     with _reading_store(path) as store:
         if len(store) == 0:
@@ -407,7 +407,7 @@ def export(out, store_path, report_dir, fmt):
 
 def _load_listed_plugins(plugins) -> None:
     """Load the --plugin modules or files of a listing command (a bad one is a one-line error)."""
-    from .plugins import PluginError, load_plugins, parse_plugin
+    from .run.plugins import PluginError, load_plugins, parse_plugin
 
     try:
         load_plugins([parse_plugin(ref) for ref in plugins])
@@ -419,7 +419,7 @@ def _load_listed_plugins(plugins) -> None:
 @click.option("--plugin", "plugins", multiple=True, metavar="MODULE_OR_FILE", help=_PLUGIN_HELP)
 def methods(plugins):
     """List the registered design methods, their hyperparameters and defaults."""
-    from .registry import methods as registered_methods
+    from .run.registry import methods as registered_methods
 
     _load_listed_plugins(plugins)
     for name, method in sorted(registered_methods().items()):
@@ -436,7 +436,7 @@ def methods(plugins):
 @click.argument("name", required=False)
 def presets(name):
     """List the shipped presets, or print one preset's spec."""
-    from .spec import SpecError, load_spec, preset_names
+    from .run.spec import SpecError, load_spec, preset_names
 
     if name:
         try:
@@ -453,7 +453,7 @@ def presets(name):
 @click.option("--plugin", "plugins", multiple=True, metavar="MODULE_OR_FILE", help=_PLUGIN_HELP)
 def families(plugins):
     """List the instance families an [instances] table can name, and the fields 'where' filters on."""
-    from .families import family_names, get_family
+    from .run.families import family_names, get_family
 
     _load_listed_plugins(plugins)
     for name in family_names():

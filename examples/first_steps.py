@@ -29,7 +29,7 @@ import numpy as np
 
 from baselines import lqr, sls, sparse_admm, sparse_delayed
 from codesign import Instance, StaticGain, get_method, grnn, method, paper_instance, score
-from compare.styles import style_for
+from compare.report.styles import style_for
 
 SMALL = os.environ.get("EXAMPLES_SMALL") == "1"
 STEPS = 40 if SMALL else 150

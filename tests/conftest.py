@@ -22,7 +22,7 @@ def forbid_instance_builds(monkeypatch):
     def forbid():
         from dataclasses import replace
 
-        from compare import execution, families
+        from compare.run import execution, families
 
         def refuse(spec):
             raise InstanceBuilt(f"an instance was built: {spec}")

@@ -1,7 +1,7 @@
 """Read a report's cost-versus-links figures back, and check them against the records and the findings.
 
 Everything here reads what a figure holds: the artists of the static figures (lines by
-their gid, :func:`compare.figures.front_gid` and :func:`compare.figures.method_gid`) and
+their gid, :func:`compare.report.figures.front_gid` and :func:`compare.report.figures.method_gid`) and
 the plotly JSON embedded in ``report.html``. Whether a drawn point is *reached* is then
 recomputed from the records alone, without the code that chose what to draw:
 

@@ -1,4 +1,4 @@
-"""The answer a report opens with: each rule of compare/answer.py on small synthetic records."""
+"""The answer a report opens with: each rule of compare/report/answer.py on small synthetic records."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import re
 
 import pytest
 
-from compare.answer import MAX_SENTENCES, answer_lines, pooled_tests
-from compare.findings import select_comparisons
-from compare.records import Records, canonical_key
+from compare.report.answer import MAX_SENTENCES, answer_lines, pooled_tests
+from compare.report.findings import select_comparisons
+from compare.run.records import Records, canonical_key
 
 SD, TANH, LINEAR, GRNN = "Sparse delayed K (l1)", "GRNN-Sparse", "Linear GRNN-Sparse", "GRNN"
 

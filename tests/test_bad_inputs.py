@@ -18,13 +18,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import compare.registry  # noqa: F401  (the built-in methods)
+import compare.run.registry  # noqa: F401  (the built-in methods)
 from baselines import lqr
 from codesign import Instance, InstanceError, StaticGain, paper_instance, score
 from codesign.methods import AtLeast, Method, get_method, registered_methods
 from compare.cli import main
-from compare.families import get_family
-from compare.spec import DENSE_MATRICES, SpecError, _check_memory, load_spec, preset_names
+from compare.run.families import get_family
+from compare.run.spec import DENSE_MATRICES, SpecError, _check_memory, load_spec, preset_names
 
 SPEC = textwrap.dedent("""\
     name = "bad-inputs"
@@ -182,8 +182,8 @@ def test_a_method_returning_no_design_is_an_error_naming_it():
 
 def test_the_runner_records_a_method_returning_no_design_as_failed(monkeypatch):
     from codesign import methods
-    from compare.runner import execute_run
-    from compare.spec import EvaluationSpec, Run
+    from compare.run.runner import execute_run
+    from compare.run.spec import EvaluationSpec, Run
 
     monkeypatch.setitem(methods._REGISTRY, "empty_method_run", Method.from_function(_empty, name="empty_method_run"))
     spec = {"family": "paper", "seed": 0, "n": 6, "degree": 4, "a_norm": 0.995, "b_norm": 1.0, "hops": 3,

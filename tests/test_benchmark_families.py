@@ -16,9 +16,9 @@ from codesign import count_links
 from codesign.status import USABLE
 from compare import SpecError, parse_spec
 from compare.cli import main
-from compare.families.chain import actuated_nodes, chain_instance
-from compare.families.platoon import platoon_instance
-from compare.families.swing_grid import mesh_edges, swing_grid_instance, swing_matrix
+from compare.run.families.chain import actuated_nodes, chain_instance
+from compare.run.families.platoon import platoon_instance
+from compare.run.families.swing_grid import mesh_edges, swing_grid_instance, swing_matrix
 
 
 # -- the chain -----------------------------------------------------------------------
@@ -182,7 +182,7 @@ def test_every_method_runs_on_each_benchmark_family(tmp_path, instances):
     result = CliRunner().invoke(main, ["run", str(tmp_path / "b.toml"), "--out", str(tmp_path / "out"),
                                        "--workers", "1", "--no-progress"])
     assert result.exit_code == 0, result.output
-    from compare.store import Store
+    from compare.run.store import Store
 
     with Store(tmp_path / "out" / "results.sqlite") as store:
         records = store.records()

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-import compare.registry  # noqa: F401  (the built-ins: importing a family registers no method)
+import compare.run.registry  # noqa: F401  (the built-ins: importing a family registers no method)
 from codesign import get_method, paper_instance
 from codesign.status import USABLE
-from compare.families.chain import chain_instance
+from compare.run.families.chain import chain_instance
 
 HEURISTICS = {"instantaneous": ["sparse_admm", "sparse_sdp", "truncated_lqr", "sparse_budget"],
               "delayed": ["sparse_delayed", "sparse_budget"]}

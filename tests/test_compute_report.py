@@ -5,9 +5,9 @@ import time
 import numpy as np
 import pytest
 
-from compare.compute_report import (NOT_MEASURED, ComputeCell, compute_cells, compute_markdown, growth_exponent,
+from compare.report.compute_report import (NOT_MEASURED, ComputeCell, compute_cells, compute_markdown, growth_exponent,
                                     growth_sentences, instances_per_size, plot_compute)
-from compare.records import Records
+from compare.run.records import Records
 
 LINUX = sys.platform.startswith("linux")
 
@@ -150,7 +150,7 @@ def _cells(label, values, runs=6):
 
 
 def test_plot_compute_has_design_scoring_and_memory_panels_with_grouped_legend():
-    from compare.styles import style_for
+    from compare.report.styles import style_for
 
     cells = _cells("GRNN-Sparse", {n: 0.1 * n**2 for n in (10, 20, 40, 80)})
     cells += _cells("LQR", {n: 0.01 * n for n in (10, 20, 40)}, runs=2)
@@ -173,7 +173,7 @@ def test_plot_compute_has_design_scoring_and_memory_panels_with_grouped_legend()
 
 
 def test_coinciding_lines_both_stay_visible():
-    from compare.styles import style_for
+    from compare.report.styles import style_for
 
     same = {n: 0.1 * n for n in (10, 20, 40)}
     cells = _cells("A", same) + _cells("B", same)
@@ -226,26 +226,26 @@ INSTANCE = {"family": "paper", "seed": 0, "n": 6, "degree": 4, "a_norm": 0.995, 
 
 
 def _run(method, instance=INSTANCE):
-    from compare.spec import EvaluationSpec, Run
+    from compare.run.spec import EvaluationSpec, Run
 
     return Run(instance, method, method, {}, EvaluationSpec(), "f")
 
 
 def _slow_scoring(monkeypatch, pause):
     """Make the harness's scoring take ``pause`` seconds per design more."""
-    import compare.execution
+    import compare.run.execution
 
-    scored = compare.execution.evaluate
+    scored = compare.run.execution.evaluate
 
     def slow(*args, **kwargs):
         time.sleep(pause)
         return scored(*args, **kwargs)
 
-    monkeypatch.setattr(compare.execution, "evaluate", slow)
+    monkeypatch.setattr(compare.run.execution, "evaluate", slow)
 
 
 def test_a_run_measures_its_scoring_apart_from_the_method(monkeypatch):
-    from compare.execution import execute_run
+    from compare.run.execution import execute_run
 
     plain = execute_run(_run("lqr"))
     assert plain.designs[0].status == "optimal" and plain.scoring_seconds >= 0
@@ -261,7 +261,7 @@ def test_a_batch_gives_each_run_its_own_scoring_seconds(monkeypatch):
     from baselines import lqr
     from codesign import methods
     from codesign.methods import Method
-    from compare.execution import execute_task
+    from compare.run.execution import execute_task
 
     def one(instance):
         return lqr(instance)
@@ -284,7 +284,7 @@ def test_memory_added_is_the_peak_above_the_runs_start(monkeypatch):
     from baselines import lqr
     from codesign import methods
     from codesign.methods import Method
-    from compare.execution import execute_run
+    from compare.run.execution import execute_run
 
     def hungry(instance):
         block = np.ones(200 * 2**20 // 8)  # 200 MB, touched
@@ -300,8 +300,8 @@ def test_memory_added_is_the_peak_above_the_runs_start(monkeypatch):
 
 
 def test_a_report_folder_from_before_the_measurements_rebuilds_saying_they_were_not_measured(tmp_path):
-    from compare.folder import read_folder
-    from compare.report import write_report
+    from compare.report.folder import read_folder
+    from compare.report.write import write_report
 
     rows = [_row("m", n, f"r{n}{s}", 1.0, 1, 900.0, design_seconds=0.01 * n, seed=s)
             for n in (10, 20, 40, 80) for s in range(2)]

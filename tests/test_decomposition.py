@@ -6,8 +6,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pytest  # noqa: E402
 
-from compare.answer import answer_lines  # noqa: E402
-from compare.decomposition import (  # noqa: E402
+from compare.report.answer import answer_lines  # noqa: E402
+from compare.report.decomposition import (  # noqa: E402
     decompose,
     decomposition_section,
     decomposition_sentences,
@@ -15,8 +15,8 @@ from compare.decomposition import (  # noqa: E402
     nonlinearity,
     plot_decomposition,
 )
-from compare.findings import select_comparisons  # noqa: E402
-from compare.records import Records, canonical_key  # noqa: E402
+from compare.report.findings import select_comparisons  # noqa: E402
+from compare.run.records import Records, canonical_key  # noqa: E402
 
 PER_NODE = {"readout": "per_node"}
 WARM = {"readout": "per_node", "init": "delayed"}

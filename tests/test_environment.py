@@ -2,10 +2,11 @@
 
 import shutil
 import subprocess
+from pathlib import Path
 
 import pytest
 
-from compare.environment import git_commit
+from compare.run.environment import CHECKOUT, SOURCE_PATHS, git_commit
 
 
 @pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
@@ -27,3 +28,8 @@ def test_dirty_means_changed_source_not_regenerated_reports(tmp_path):
     (tmp_path / "codesign" / "x.py").write_text("a = 2\n")
     assert git_commit(tmp_path) == clean + "+dirty"
     assert git_commit(tmp_path / "nowhere") is None
+
+
+def test_the_default_root_is_the_checkout():
+    assert CHECKOUT == Path(__file__).resolve().parents[1]
+    assert all((CHECKOUT / name).exists() for name in SOURCE_PATHS)

@@ -4,7 +4,7 @@ import pytest
 from tiny_specs import tiny_spec  # tests/tiny_specs.py
 
 from compare import Store, parse_spec, run_experiment
-from compare.runner import ExecutorError, open_executor
+from compare.run.runner import ExecutorError, open_executor
 
 SPEC = tiny_spec("dask", methods=("lqr", "decentralized"), seeds=3)
 
@@ -46,7 +46,7 @@ def _thread_settings():
     import numpy as np
     from threadpoolctl import threadpool_info
 
-    from compare.runner import THREAD_VARS
+    from compare.run.runner import THREAD_VARS
 
     env = {var: os.environ.get(var) for var in THREAD_VARS}
 
@@ -60,7 +60,7 @@ def test_local_workers_are_single_threaded_for_every_thread_pool(monkeypatch):
     The BLAS pools are checked as loaded, not through the environment: numpy loads before the
     pool's initializer runs, and OpenBLAS ignores variables set after it started.
     """
-    from compare.runner import THREAD_VARS, make_executor
+    from compare.run.runner import THREAD_VARS, make_executor
 
     for var in THREAD_VARS:  # as in a user's shell (conftest sets them for the test process)
         monkeypatch.delenv(var, raising=False)

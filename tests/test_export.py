@@ -13,7 +13,7 @@ pd = pytest.importorskip("pandas")
 
 from compare import Store, parse_spec, run_experiment  # noqa: E402
 from compare.cli import main  # noqa: E402
-from compare.export import MissingExtra, designs_frame  # noqa: E402
+from compare.run.export import MissingExtra, designs_frame  # noqa: E402
 
 # Seconds to run: an exact baseline, a gamma path, a GRNN-Sparse beta path of a few steps.
 SPEC = """

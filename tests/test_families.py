@@ -9,8 +9,8 @@ from click.testing import CliRunner
 from codesign import paper_instance
 from compare import SpecError, parse_spec
 from compare.cli import main
-from compare.families import Family, family_names, get_family, register_family
-from compare.store import Store
+from compare.run.families import Family, family_names, get_family, register_family
+from compare.run.store import Store
 
 SPEC = """
 name = "mine"
@@ -166,7 +166,7 @@ def test_a_family_of_ones_own_can_be_registered(tmp_path):
 
 # -- nodes with several states: the mass-spring chain ------------------------------------------
 from codesign import Instance, compare_exact_and_simulated, count_links, get_method  # noqa: E402
-from compare.families.mass_spring import mass_spring_instance  # noqa: E402
+from compare.run.families.mass_spring import mass_spring_instance  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -295,7 +295,7 @@ def test_node_maps_are_validated_by_name():
 
 
 def test_random_network_follows_the_lqrsp_example():
-    from compare.families.random_network import random_network_instance
+    from compare.run.families.random_network import random_network_instance
 
     net = random_network_instance(12, seed=1)
     assert (net.n, net.m, net.nodes) == (24, 12, 12)

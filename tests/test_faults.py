@@ -20,7 +20,7 @@ from click.testing import CliRunner
 
 from compare import Store, StoreError, parse_spec, run_experiment
 from compare.cli import main
-from compare.store import APPLICATION_ID, SCHEMA_VERSION
+from compare.run.store import APPLICATION_ID, SCHEMA_VERSION
 from cli_checks import error_line, file_sha  # tests/cli_checks.py
 
 PLUGIN = Path(__file__).resolve().parent / "fault_methods.py"
@@ -160,14 +160,14 @@ def test_bogus_executor_is_refused_before_a_store_exists(tmp_path):
 
 
 def test_an_unwritable_report_folder_is_exit_2(tmp_path, monkeypatch):
-    import compare.report
+    import compare.report.write
 
     spec = _spec(tmp_path / "s.toml", ["lqr"])
 
     def refuse(*args, **kwargs):
         raise PermissionError(13, "Permission denied")
 
-    monkeypatch.setattr(compare.report, "write_report", refuse)
+    monkeypatch.setattr(compare.report.write, "write_report", refuse)
     store = tmp_path / "elsewhere" / "r.sqlite"
     result = CliRunner().invoke(main, ["run", str(spec), "--out", str(tmp_path / "out"), "--store", str(store),
                                        "--workers", "1", "--no-progress"])
@@ -305,8 +305,8 @@ def test_no_worker_outlives_its_run(tmp_path, how):
 
 
 def test_a_run_stopped_at_its_time_limit_reruns_only_when_given_longer(tmp_path):
-    from compare.pool import WorkerPool
-    from compare.spec import load_spec
+    from compare.run.pool import WorkerPool
+    from compare.run.spec import load_spec
 
     def spec(limit):
         return load_spec(_spec(tmp_path / f"t{limit}.toml", ["fault_hang"], name="t", extra=f"timeout = {limit}\n"))
@@ -322,7 +322,7 @@ def test_a_run_stopped_at_its_time_limit_reruns_only_when_given_longer(tmp_path)
 
 
 def test_a_bad_timeout_is_refused(tmp_path):
-    from compare.spec import SpecError, load_spec
+    from compare.run.spec import SpecError, load_spec
 
     for bad in ("0", "-3", "nan", '"long"'):
         with pytest.raises(SpecError, match="timeout: must be a positive number of seconds"):
@@ -350,7 +350,7 @@ def test_an_unreachable_scheduler_is_refused_before_a_store_exists(tmp_path):
 
 
 def test_a_locked_store_and_an_unwritable_folder_are_told_apart(tmp_path, monkeypatch):
-    from compare.store import _explain
+    from compare.run.store import _explain
 
     path = tmp_path / "r.sqlite"
     locked = _explain(path, sqlite3.OperationalError("database is locked"))

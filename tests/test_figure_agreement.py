@@ -22,16 +22,16 @@ import pytest  # noqa: E402
 from figure_agreement import (Drawn, below_their_front, contradictions, plotly_figures, plotly_fronts,  # noqa: E402
                               plotly_points, reach, static_fronts, static_points, unreached)  # tests/figure_agreement.py
 
-from compare.cost_links import aggregate, plot_cost_vs_links  # noqa: E402
-from compare.figures import plot_budget_fronts  # noqa: E402
-from compare.findings import select_comparisons  # noqa: E402
-from compare.folder import read_folder  # noqa: E402
-from compare.meta import StoreMeta  # noqa: E402
-from compare.records import Records  # noqa: E402
-from compare.report import plant_links, report_records, write_report  # noqa: E402
-from compare.report_tables import asked_pairs  # noqa: E402
-from compare.statistics import budget_fronts  # noqa: E402
-from compare.styles import label_styles  # noqa: E402
+from compare.report.cost_links import aggregate, plot_cost_vs_links  # noqa: E402
+from compare.report.figures import plot_budget_fronts  # noqa: E402
+from compare.report.findings import select_comparisons  # noqa: E402
+from compare.report.folder import read_folder  # noqa: E402
+from compare.run.meta import StoreMeta  # noqa: E402
+from compare.run.records import Records  # noqa: E402
+from compare.report.write import plant_links, report_records, write_report  # noqa: E402
+from compare.report.tables import asked_pairs  # noqa: E402
+from compare.report.statistics import budget_fronts  # noqa: E402
+from compare.report.styles import label_styles  # noqa: E402
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
 SHIPPED = sorted(p.name for p in REPORTS.iterdir() if (p / "runs.csv").exists())

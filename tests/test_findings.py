@@ -9,12 +9,12 @@ from matplotlib.colors import to_hex  # noqa: E402
 
 from dataclasses import replace  # noqa: E402
 
-from compare.findings import BOUND_LABEL, Comparison, holm, is_sls_bound, select_comparisons, unresolved  # noqa: E402
-from compare.findings_text import findings_markdown  # noqa: E402
-from compare.forest import plot_forest  # noqa: E402
-from compare.records import Records  # noqa: E402
-from compare.statistics import Paired  # noqa: E402
-from compare.styles import label_styles  # noqa: E402
+from compare.report.findings import BOUND_LABEL, Comparison, holm, is_sls_bound, select_comparisons, unresolved  # noqa: E402
+from compare.report.findings_text import findings_markdown  # noqa: E402
+from compare.report.forest import plot_forest  # noqa: E402
+from compare.run.records import Records  # noqa: E402
+from compare.report.statistics import Paired  # noqa: E402
+from compare.report.styles import label_styles  # noqa: E402
 
 SD, TANH, LINEAR, GRNN = "Sparse K, delayed (l1)", "GRNN-Sparse", "Linear GRNN-Sparse", "GRNN"
 ADMM, DEC, SLS = "Sparse K (l1 ADMM)", "Decentralized", "SLS (topology family)"
@@ -346,7 +346,7 @@ def test_budgets_are_links_per_node_in_each_panel():
 @pytest.mark.parametrize("panel_inches", [1.6, 4.0])
 def test_forest_tick_labels_never_overlap_and_stay_inside_their_panel(panel_inches):
     """Four narrow panels side by side (scale-large) once printed "+0.001+0.01" as one word."""
-    from compare.forest import _symlog_axis
+    from compare.report.forest import _symlog_axis
 
     fig, axes = plt.subplots(1, 4, figsize=(1.0 + 4 * panel_inches, 2.0))
     fig.subplots_adjust(left=0.5 / fig.get_figwidth(), right=0.98, wspace=0.06)

@@ -1,4 +1,4 @@
-"""A report folder that rebuilds itself: compare.folder's files read back exactly what the store holds."""
+"""A report folder that rebuilds itself: compare.report.folder's files read back exactly what the store holds."""
 
 import inspect
 import json
@@ -12,8 +12,8 @@ import pytest
 from click.testing import CliRunner
 
 from compare.cli import main
-from compare.folder import FOLDER_FILES, FolderError, read_folder, topology_supports, write_folder
-from compare.records import Records
+from compare.report.folder import FOLDER_FILES, FolderError, read_folder, topology_supports, write_folder
+from compare.run.records import Records
 
 SPEC = """
 name = "folder-tiny"
@@ -303,7 +303,7 @@ def test_report_from_a_malformed_folder_exits_2_with_one_line(tmp_path):
 
 
 def test_report_without_store_hands_the_folder_data_to_write_report(tmp_path, monkeypatch):
-    import compare.report
+    import compare.report.write
 
     folder = _good_folder(tmp_path)
     calls = []
@@ -312,7 +312,7 @@ def test_report_without_store_hands_the_folder_data_to_write_report(tmp_path, mo
         calls.append((records, Path(out), kwargs))
         return {"md": Path(out) / "report.md"}
 
-    monkeypatch.setattr(compare.report, "write_report", fake_write_report)
+    monkeypatch.setattr(compare.report.write, "write_report", fake_write_report)
     result = CliRunner().invoke(main, ["report", "--out", str(folder)])
     assert result.exit_code == 0, result.output
     assert "rebuilt from the folder's runs.csv and report.json" in result.output
@@ -323,7 +323,8 @@ def test_report_without_store_hands_the_folder_data_to_write_report(tmp_path, mo
     assert kwargs["load_controller"]("k1", 0).support.all()
 
 
-@pytest.mark.skipif("software" not in inspect.signature(__import__("compare.report").report.write_report).parameters,
+@pytest.mark.skipif("software" not in inspect.signature(
+    __import__("compare.report.write").report.write.write_report).parameters,
                     reason="write_report does not yet take software= (and write the folder's files)")
 def test_compare_report_rebuilds_the_same_report_without_its_store(stored, tmp_path, forbid_instance_builds):
     from compare import Store

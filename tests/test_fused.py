@@ -15,7 +15,7 @@ from codesign.learned import fused
 from codesign.learned.engines import resolve_engine
 from codesign.learned.trainer import selection_set
 from codesign.learned.grnn_bptt import ModelSpec, _Problem, grnn_loss_and_grad, init_fwg
-from compare.families.mass_spring import mass_spring_instance
+from compare.run.families.mass_spring import mass_spring_instance
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ import pytest
 
 from baselines import GCNNController, gcnn, gcnn_batch
 from codesign import controller_from_arrays, paper_instance, simulate
-from compare.registry import get_method
+from compare.run.registry import get_method
 from references import gcnn_cost_autograd  # tests/references.py
 
 
@@ -119,7 +119,7 @@ def test_fused_engine_equals_the_torch_path(dtype, rtol):
 
 
 def test_gcnn_engines_agree_and_fused_refuses_node_blocks():
-    from compare.families.mass_spring import mass_spring_instance
+    from compare.run.families.mass_spring import mass_spring_instance
 
     inst = paper_instance(4, n=8, degree=4, horizon=10)
     short = dict(steps=15, ensemble=1, stability_steps=0, curve_size=20, curve_every=5)
@@ -133,7 +133,7 @@ def test_gcnn_engines_agree_and_fused_refuses_node_blocks():
 
 def test_auto_takes_the_fused_gcnn_only_where_it_is_faster():
     from codesign.learned.gcnn import parse_job
-    from compare.families.mass_spring import mass_spring_instance
+    from compare.run.families.mass_spring import mass_spring_instance
 
     assert parse_job(paper_instance(0, n=20), {}).engine == "fused"
     assert parse_job(paper_instance(0, n=40, degree=6), {}).engine == "torch"  # dense loops do not unroll

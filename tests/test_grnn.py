@@ -185,7 +185,7 @@ def test_bad_input_raises(inst):
 
 @pytest.mark.parametrize("name", ["grnn", "grnn_dense", "grnn_fixed"])
 def test_co_design_settings_are_rejected_by_the_other_variants(inst, name):
-    from compare.registry import get_method
+    from compare.run.registry import get_method
 
     method = get_method(name)
     for key in ("beta", "l1_lr", "threshold", "refine_ensemble"):

@@ -17,8 +17,8 @@ from codesign import exact_cost, paper_instance, simulate
 from codesign.design import count_links
 from codesign.evaluation import validation_set
 from codesign.learned import GRNNController, LinearGRNNController, delayed_gain_parts, embed_delayed_gain
-from compare.families.chain import chain_instance
-from compare.families.mass_spring import mass_spring_instance
+from compare.run.families.chain import chain_instance
+from compare.run.families.mass_spring import mass_spring_instance
 
 #: Relative agreement of the embedded GRNN's exact cost with the design's.
 RTOL = 1e-10

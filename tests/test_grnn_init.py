@@ -16,7 +16,7 @@ from codesign.design import count_links
 from codesign.learned import grnn_batch
 from codesign.learned.grnn import GRNNController, GRNNSettings, LinearGRNNController, _first_stage_specs, _parse
 from codesign.learned.warm import StartCache, build_start, delayed_gamma
-from compare.families.mass_spring import mass_spring_instance
+from compare.run.families.mass_spring import mass_spring_instance
 
 #: Short training: seconds per run at N = 8.
 SHORT = dict(steps=15, ensemble=2, stability_steps=30, curve_size=20, batch=10)
@@ -214,7 +214,7 @@ def test_init_auto_starts_from_the_diagonal_gain_on_unstable_plants_only():
 
 
 def test_reports_tell_readouts_and_warm_starts_apart():
-    from compare.styles import METHOD_STYLES, kind_suffix, style_for, style_key
+    from compare.report.styles import METHOD_STYLES, kind_suffix, style_for, style_key
 
     paper = {"beta": 0.1}
     per_node = {**paper, "readout": "per_node"}

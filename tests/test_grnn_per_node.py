@@ -13,7 +13,7 @@ from codesign.learned.grnn import GRNNController, LinearGRNNController, _padded_
 from codesign.learned.grnn_bptt import (GRNNStack, ModelSpec, _Problem, grnn_loss_and_grad,
                                         init_fwg, train_grnn)
 from codesign.learned.trainer import selection_set
-from compare.families.mass_spring import mass_spring_instance
+from compare.run.families.mass_spring import mass_spring_instance
 from references import grnn_loss_autograd  # tests/references.py
 
 SHORT = dict(steps=20, ensemble=1, stability_steps=30, curve_size=20)

@@ -8,9 +8,9 @@ matplotlib.use("Agg")
 
 import numpy as np  # noqa: E402
 
-from compare.records import Records  # noqa: E402
+from compare.run.records import Records  # noqa: E402
 
-from compare.learning_report import (  # noqa: E402
+from compare.report.learning_report import (  # noqa: E402
     PAPER_TABLE1,
     SPARSE_EDGES_NOTE,
     bootstrap_interval,
@@ -101,7 +101,7 @@ def test_no_negative_zero_no_scientific_link_counts_and_every_dash_defined():
 
 
 def test_signed_drops_the_sign_of_a_value_that_rounds_to_zero():
-    from compare.learning_report import _signed
+    from compare.report.learning_report import _signed
 
     assert _signed(-0.00004, 4) == "0.0000" and _signed(-0.04, 1, " %") == "0.0 %"
     assert _signed(-0.06, 1, " %") == "-0.1 %" and _signed(0.25, 2) == "+0.25"
@@ -134,7 +134,7 @@ def test_training_curves_figure_returns_handles():
 def test_training_curves_take_each_method_colour_from_the_report_styles():
     import matplotlib.pyplot as plt
 
-    from compare.styles import Style, label_styles
+    from compare.report.styles import Style, label_styles
 
     records = _records()
     by_label = lambda ax: {ln.get_label().split(",")[0]: ln for ln in ax.lines if "instances" in ln.get_label()}
@@ -152,7 +152,7 @@ def test_training_curves_take_each_method_colour_from_the_report_styles():
 
 
 def test_paper_values_give_each_gap_in_standard_errors_with_what_is_known():
-    from compare.learning_report import GAP_REASONS, gap_z, paper_values
+    from compare.report.learning_report import GAP_REASONS, gap_z, paper_values
 
     costs = list(np.linspace(1.40, 1.50, 20)) + [5.0] * 5
     (value,) = paper_values(_fixed(costs))

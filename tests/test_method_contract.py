@@ -13,11 +13,11 @@ import pytest
 
 from codesign import INFO_MODELS, STATUSES, Design, paper_instance
 from codesign.methods import Hyperparameter, registered_methods
-from compare.plugins import load_plugins, parse_plugin
+from compare.run.plugins import load_plugins, parse_plugin
 
 # The plug-in a user would write, loaded from a file as `compare run --plugin` does.
 load_plugins([parse_plugin(str(Path(__file__).with_name("plugin_methods.py")))])
-import compare.registry  # noqa: E402,F401  (the built-ins)
+import compare.run.registry  # noqa: E402,F401  (the built-ins)
 
 #: Settings that keep each slow method to a second or so; every other method runs its defaults.
 FAST = {
@@ -114,7 +114,7 @@ def test_a_method_refuses_at_once_past_its_size(instance):
     """
     import dataclasses
 
-    from compare.registry import get_method
+    from compare.run.registry import get_method
 
     admm = get_method("sparse_admm")
     assert admm.max_states == 300 and "19 minutes at 500" in admm.max_states_reason

@@ -23,7 +23,7 @@ import pytest
 from click.testing import CliRunner
 
 from compare import Store, StoreError, parse_spec, run_experiment
-from compare.spec import SpecError
+from compare.run.spec import SpecError
 from compare.cli import main
 
 from cli_checks import error_line, file_sha  # tests/cli_checks.py
@@ -244,7 +244,7 @@ def test_the_store_refuses_its_own_rows_by_the_same_check(good_store, tmp_path):
 
 # -- 6. a spec file with a byte-order mark -----------------------------------------------------------------
 def test_a_spec_file_with_a_byte_order_mark_is_read(tmp_path):
-    from compare.spec import load_spec
+    from compare.run.spec import load_spec
 
     path = tmp_path / "bom.toml"
     path.write_bytes(b"\xef\xbb\xbf" + SPEC.encode("utf-8"))
@@ -328,7 +328,7 @@ def test_a_seed_count_is_refused_before_the_family_lists_its_instances(monkeypat
     """1e9 seeds: listing them first would take tens of GB; the count alone is refused at once."""
     import dataclasses
 
-    import compare.families as families
+    import compare.run.families as families
 
     paper = families.get_family("paper")
     listed = []
@@ -354,7 +354,7 @@ def test_max_instances_raises_or_lowers_the_limit():
 
 
 def test_planning_shows_progress_and_writes_the_instance_facts_in_batches(tmp_path, monkeypatch):
-    from compare import runner
+    from compare.run import runner
 
     bars, writes = [], []
     real_tqdm, real_set_metas = runner.tqdm, Store.set_metas
@@ -427,7 +427,7 @@ def _doc_trunc10():
 
 def test_the_docs_trunc10_runs_on_multi_state_nodes_only_when_registered_for_them():
     from codesign.methods import Method
-    from compare.families import get_family
+    from compare.run.families import get_family
 
     trunc10, text = _doc_trunc10()
     family = get_family("mass_spring")

@@ -23,7 +23,7 @@ from baselines.sparse_delayed import (
 from codesign import compare_exact_and_simulated, count_links, get_method
 from codesign.controllers import controller_from_arrays
 from codesign.evaluation import exact_cost, simulate, spectral_radius
-from compare.families.mass_spring import mass_spring_instance
+from compare.run.families.mass_spring import mass_spring_instance
 from references import augmented_delayed_reference  # tests/references.py
 
 # `baselines.sparse_delayed` resolves to the function once a package imports it; the module by full name.

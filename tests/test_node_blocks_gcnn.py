@@ -8,12 +8,12 @@ import sys
 import numpy as np
 import pytest
 
-import compare.registry  # noqa: F401  (the built-ins)
+import compare.run.registry  # noqa: F401  (the built-ins)
 from baselines import GCNNController, gcnn, gcnn_batch
 from codesign import Instance, controller_from_arrays, get_method, paper_instance, simulate
 from codesign.design import count_links
 from codesign.evaluation import validation_set
-from compare.families.mass_spring import mass_spring_instance
+from compare.run.families.mass_spring import mass_spring_instance
 from references import gcnn_block_cost_autograd  # tests/references.py
 
 FAST = dict(steps=20, ensemble=1, stability_steps=0, curve_size=20)

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import compare.registry  # noqa: F401  (the built-ins: importing a family registers no method)
+import compare.run.registry  # noqa: F401  (the built-ins: importing a family registers no method)
 from codesign import compare_exact_and_simulated, controller_from_arrays, count_links, get_method
 from codesign.evaluation import impulse_responses
 from codesign.learned.grnn import GRNNController, LinearGRNNController, _padded_problem
 from codesign.learned.trainer import selection_set
 from codesign.learned.grnn_bptt import ModelSpec, init_fwg, train_grnn
-from compare.families.mass_spring import mass_spring_instance
+from compare.run.families.mass_spring import mass_spring_instance
 from references import assert_bptt_matches_autograd  # tests/references.py
 
 SHORT = dict(steps=60, ensemble=1, stability_steps=50, curve_size=20)

@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-import compare.registry  # noqa: F401  (the built-ins)
+import compare.run.registry  # noqa: F401  (the built-ins)
 from baselines._sparse import GRAD_RTOL, pattern_of
 from baselines.sparse_sdp import SparseSDP
 from codesign import get_method, static_gain_cost_and_grad
 from codesign.design import count_links
 from codesign.evaluation import spectral_radius
-from compare.families.mass_spring import mass_spring_instance
+from compare.run.families.mass_spring import mass_spring_instance
 
 #: On the 8-mass chain (gamma_max about 0.237) these give 36, 32, 28, 24 and 0 links.
 #: The path is not monotone everywhere: gamma = 3e-3 gives 40 links, more than 1e-3's 36.

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import compare.registry  # noqa: F401  (the built-ins)
+import compare.run.registry  # noqa: F401  (the built-ins)
 from codesign import get_method, paper_instance, simulate, validation_set
 
 REFERENCE = json.loads((Path(__file__).parent / "data" / "p1_reference.json").read_text())

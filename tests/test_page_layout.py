@@ -26,7 +26,7 @@ pytest.importorskip("plotly", reason="plotly is not installed")
 
 from test_report_browser import _browser_path, _row  # noqa: E402  (tests/test_report_browser.py)
 
-from compare.records import Records, canonical_key  # noqa: E402
+from compare.run.records import Records, canonical_key  # noqa: E402
 
 #: The shipped reports; $COMPARE_REPORTS names another folder of report folders (rebuilt copies, say).
 REPORTS = Path(os.environ.get("COMPARE_REPORTS") or Path(__file__).resolve().parents[1] / "reports")
@@ -121,7 +121,7 @@ def _grid_records() -> Records:
 
 @pytest.fixture(scope="module")
 def written_page(tmp_path_factory) -> Path:
-    from compare.report import write_report
+    from compare.report.write import write_report
 
     out = tmp_path_factory.mktemp("grid")
     files = write_report(_grid_records(), out, title="Grid page")

@@ -37,7 +37,7 @@ SPEC = tiny_spec("mine", methods=("lqr", "my_methods:trunc10"), tail="grid = { l
 @pytest.fixture(autouse=True)
 def _forget_plugins():
     """Each test writes its own ``my_methods.py``: forget the one a previous test imported."""
-    from compare import plugins
+    from compare.run import plugins
 
     yield
     sys.modules.pop("my_methods", None)
@@ -199,7 +199,7 @@ def test_validation_size_reaches_learned_methods(tmp_path):
         params = { steps = 2, ensemble = 1, stability_steps = 0 }
     ''')
     from codesign.evaluation import simulate_to_precision
-    from compare.runner import build_instance
+    from compare.run.runner import build_instance
 
     with Store(tmp_path / "v.sqlite") as store:
         run_experiment(parse_spec(spec), store, progress=False)
@@ -261,9 +261,9 @@ def test_claims_of_a_dead_process_are_taken_over(tmp_path):
 
 def test_a_worker_that_cannot_load_a_plugin_stops_the_run_with_a_message(tmp_path):
     """A worker lacking a plug-in is the environment's fault, not the run's: no failed run is stored."""
-    from compare.plugins import Plugin
-    from compare.runner import WorkerSetupError, execute_task
-    from compare.spec import parse_spec
+    from compare.run.plugins import Plugin
+    from compare.run.runner import WorkerSetupError, execute_task
+    from compare.run.spec import parse_spec
 
     spec = parse_spec('name = "x"\n[instances]\nn = [6]\ndegree = 3\nhorizon = 5\n[[methods]]\nmethod = "lqr"\n')
     missing = Plugin(ref="gone.py", target=str(tmp_path / "gone.py"))
@@ -272,9 +272,9 @@ def test_a_worker_that_cannot_load_a_plugin_stops_the_run_with_a_message(tmp_pat
 
 
 def test_a_solver_only_one_method_uses_enters_only_its_fingerprint():
-    import compare.registry  # noqa: F401  (the built-ins)
+    import compare.run.registry  # noqa: F401  (the built-ins)
     from codesign import get_method
-    from compare.fingerprint import NUMERIC_PACKAGES, fingerprint_details
+    from compare.run.fingerprint import NUMERIC_PACKAGES, fingerprint_details
 
     sdp = fingerprint_details(get_method("sparse_sdp").modules)["versions"]
     admm = fingerprint_details(get_method("sparse_admm").modules)["versions"]

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 CASES = {"ieee39": 10, "wecc": 29, "npcc": 48}
-DATA = Path(__file__).resolve().parents[1] / "compare" / "families" / "power_cases"
+DATA = Path(__file__).resolve().parents[1] / "compare" / "run" / "families" / "power_cases"
 
 
 def _load(case: str) -> dict:
@@ -28,7 +28,7 @@ def _load(case: str) -> dict:
 
 # -- the equations -------------------------------------------------------------------
 def test_two_machines_match_the_swing_equations_linearized_by_hand():
-    from compare.families.power_grid import grounded_swing
+    from compare.run.families.power_grid import grounded_swing
 
     # Two machines, EMFs E behind a lossless reactance X: P_e,0 = E0 E1 / X sin(δ0 - δ1) = -P_e,1.
     # At δ0 - δ1 = 0.3: dP_e,0/dδ0 = -dP_e,0/dδ1 = c, with c = E0 E1 / X cos 0.3, and the same for machine 1.
@@ -53,7 +53,7 @@ def test_two_machines_match_the_swing_equations_linearized_by_hand():
 
 
 def test_grounding_removes_exactly_the_rotational_zero():
-    from compare.families.power_grid import _machines, case_data, grounded_swing
+    from compare.run.families.power_grid import _machines, case_data, grounded_swing
 
     data = case_data("ieee39")
     K, M, D = _machines(data, 2.0)
@@ -70,7 +70,7 @@ def test_grounding_removes_exactly_the_rotational_zero():
 def test_the_instance_is_the_zero_order_hold_of_the_shipped_case():
     from scipy.linalg import expm
 
-    from compare.families.power_grid import power_grid_instance
+    from compare.run.families.power_grid import power_grid_instance
 
     data = _load("ieee39")
     inst = power_grid_instance("ieee39", damping=1.5, dt=0.05)
@@ -113,7 +113,7 @@ def test_the_instance_is_the_zero_order_hold_of_the_shipped_case():
 
 def test_graphs_plant_complete_given_the_strongest_couplings_connected():
     from codesign import count_links
-    from compare.families.power_grid import _components, power_grid_instance
+    from compare.run.families.power_grid import _components, power_grid_instance
 
     for case, N in CASES.items():
         inst = power_grid_instance(case, neighbours=4)
@@ -133,8 +133,8 @@ def test_graphs_plant_complete_given_the_strongest_couplings_connected():
 # -- the shipped data ------------------------------------------------------------------
 @pytest.mark.parametrize("case", CASES)
 def test_shipped_case_files_are_consistent(case):
-    from compare.families.power_cases.generate import CASES as GENERATED
-    from compare.families.power_cases.generate import dumps
+    from compare.run.families.power_cases.generate import CASES as GENERATED
+    from compare.run.families.power_cases.generate import dumps
 
     text = (DATA / f"{case}.json").read_text(encoding="utf-8")
     data = json.loads(text)
@@ -156,8 +156,8 @@ def test_shipped_case_files_are_what_andes_generates(tmp_path):
     import andes
     import kvxopt
 
-    from compare.families.power_cases.generate import CASES as GENERATED
-    from compare.families.power_cases.generate import main
+    from compare.run.families.power_cases.generate import CASES as GENERATED
+    from compare.run.families.power_cases.generate import main
 
     main(["--out", str(tmp_path), *GENERATED])
     for case in GENERATED:
@@ -175,8 +175,8 @@ def test_shipped_case_files_are_what_andes_generates(tmp_path):
 
 def test_package_data_ships_the_case_files():
     tomllib = pytest.importorskip("tomllib")
-    project = tomllib.loads((DATA.parents[2] / "pyproject.toml").read_text())
-    globs = project["tool"]["setuptools"]["package-data"]["compare"]
+    project = tomllib.loads((DATA.parents[3] / "pyproject.toml").read_text())
+    globs = project["tool"]["setuptools"]["package-data"]["compare.run"]
     assert "families/power_cases/*.json" in globs
     assert sorted(p.stem for p in DATA.glob("*.json")) == sorted(CASES)
     assert any(d.startswith("andes") for d in project["project"]["optional-dependencies"]["power"])
@@ -186,7 +186,7 @@ def test_package_data_ships_the_case_files():
 @pytest.mark.parametrize("case", CASES)
 def test_the_familys_equations_reproduce_the_shipped_modes(case):
     """At the case's own damping, the grounded model has ANDES's electromechanical frequencies."""
-    from compare.families.power_grid import _machines, case_data, grounded_swing
+    from compare.run.families.power_grid import _machines, case_data, grounded_swing
 
     data = case_data(case)
     eig = np.linalg.eigvals(grounded_swing(*_machines(data, "case"), data["reference"])[0])
@@ -203,7 +203,7 @@ def test_new_england_modes_match_the_published_picture():
     England machines swing together against the New York equivalent (G10, bus 39). The
     exact values are those ANDES computes (the shipped ``modes_hz``), pinned here.
     """
-    from compare.families.power_grid import _machines, case_data
+    from compare.run.families.power_grid import _machines, case_data
 
     data = case_data("ieee39")
     K, M, _ = _machines(data, 0.0)
@@ -221,7 +221,7 @@ def test_new_england_modes_match_the_published_picture():
 
 
 def test_open_loop_spectral_radii_at_the_defaults():
-    from compare.families.power_grid import power_grid_instance
+    from compare.run.families.power_grid import power_grid_instance
 
     radii = {case: np.max(np.abs(np.linalg.eigvals(power_grid_instance(case).A))) for case in CASES}
     np.testing.assert_allclose([radii[c] for c in CASES], [0.98951, 0.99035, 0.99982], atol=1e-5)
@@ -250,7 +250,7 @@ def test_bad_power_grid_keys_are_named(table, message):
 
 def test_specs_expand_per_case_and_refuse_a_changed_data_file():
     from compare import parse_spec
-    from compare.families import get_family
+    from compare.run.families import get_family
 
     spec = parse_spec('name = "p"\n[instances]\nfamily = "power_grid"\ncase = ["ieee39", "wecc"]\n'
                       'damping = "case"\n[[methods]]\nmethod = "lqr"\nwhere = { case = ["wecc"] }\n')
@@ -268,7 +268,7 @@ def test_every_method_runs_on_the_new_england_system(tmp_path):
 
     from codesign.status import USABLE
     from compare.cli import main
-    from compare.store import Store
+    from compare.run.store import Store
 
     (tmp_path / "p.toml").write_text("""name = "p"
 [instances]

@@ -12,10 +12,10 @@ import re
 
 import pytest
 
-from compare.answer import MAX_SENTENCES, answer_lines
-from compare.findings import select_comparisons
-from compare.ladder import ladder_table, system_names
-from compare.records import Records, canonical_key
+from compare.report.answer import MAX_SENTENCES, answer_lines
+from compare.report.findings import select_comparisons
+from compare.report.ladder import ladder_table, system_names
+from compare.run.records import Records, canonical_key
 
 ADMM, DELAYED, GRNN_SPARSE = "Sparse K (l1 ADMM)", "Sparse delayed K (l1)", "GRNN-Sparse (β path)"
 CLAIM = "One wide-area link gives almost centralized performance (Dörfler et al. 2014)"
@@ -195,7 +195,7 @@ def test_bad_ladders_are_named(ladder, message):
 
 
 def test_the_power_preset_asks_for_the_ladder_of_every_method_it_runs():
-    from compare.spec import load_spec
+    from compare.run.spec import load_spec
 
     spec = load_spec("power")
     assert spec.ladder["budgets"] == [1, 2, 5] and spec.ladder["claim"]
@@ -216,7 +216,7 @@ def test_the_no_link_design_is_named_after_the_diagonal_gain_where_a_path_ends_o
 
 
 def test_a_written_report_opens_with_the_ladder_and_a_rebuilt_one_says_the_same(tmp_path):
-    from compare.report import write_report
+    from compare.report.write import write_report
 
     rows = _power_rows()
     write_report(rows, tmp_path / "a", meta={"spec:power": SPEC}, title="power")

@@ -51,20 +51,20 @@ def test_the_scan_finds_private_imports(tmp_path):
     sample = tmp_path / "sample.py"
     sample.write_text("from __future__ import annotations\n"
                       "from .spec import _check_keys, parse_spec\n"
-                      "from compare.figures import __all__, _y_limits as limits\n"
+                      "from compare.report.figures import __all__, _y_limits as limits\n"
                       "from numpy import _private_of_others\n"
                       "def f():\n"
                       "    from ..execution import _limit_threads\n"
-                      "text = 'from compare.spec import _typed'\n")
+                      "text = 'from compare.run.spec import _typed'\n")
     assert private_imports(sample, tmp_path) == ["sample.py:2: _check_keys (from .spec)",
-                                                 "sample.py:3: _y_limits (from compare.figures)",
+                                                 "sample.py:3: _y_limits (from compare.report.figures)",
                                                  "sample.py:6: _limit_threads (from ..execution)"]
 
 
 def test_the_scan_reads_the_packages():
     sources = _sources()
     assert len(sources) > 50
-    assert ROOT / "compare" / "spec.py" in sources
+    assert ROOT / "compare" / "run" / "spec.py" in sources
 
 
 def test_no_module_imports_a_private_name():

@@ -8,7 +8,7 @@ import pytest
 
 from codesign import Design
 from compare import Store
-from compare.records import DesignRecord, InstanceRecord, Records, as_records, canonical_key
+from compare.run.records import DesignRecord, InstanceRecord, Records, as_records, canonical_key
 
 INST = [{"family": "paper", "seed": s, "n": 8, "degree": 4, "a_norm": a, "b_norm": 1.0, "hops": 3, "horizon": 10}
         for a in (0.995, 1.05) for s in range(2)]
@@ -122,20 +122,20 @@ def test_as_records_passes_records_through_and_converts_dicts_and_designs():
 
 
 def test_old_store_without_facts_leaves_them_none_and_nothing_is_rebuilt(tmp_path, monkeypatch):
-    import compare.execution
-    from compare.report import plant_links
+    import compare.run.execution
+    from compare.report.write import plant_links
 
     with _store(tmp_path / "old.sqlite", facts=False) as store:
         records = store.records()
     inst = records[0].instance
     assert not inst.has_facts and inst.plant_links is None and inst.nodes == 8
-    monkeypatch.setattr(compare.execution, "build_instance", lambda spec: pytest.fail("the report built an instance"))
+    monkeypatch.setattr(compare.run.execution, "build_instance", lambda spec: pytest.fail("the report built an instance"))
     assert plant_links(records) == {}
 
 
 def test_report_boundary_uses_the_stored_facts_without_rebuilding(tmp_path, monkeypatch):
-    import compare.execution
-    from compare.report import plant_links
+    import compare.run.execution
+    from compare.report.write import plant_links
 
     with _store(tmp_path / "s.sqlite", facts=True) as store:
         records = store.records()
@@ -143,13 +143,13 @@ def test_report_boundary_uses_the_stored_facts_without_rebuilding(tmp_path, monk
     def fail(spec):
         raise AssertionError("the report rebuilt an instance whose facts are stored")
 
-    monkeypatch.setattr(compare.execution, "build_instance", fail)
+    monkeypatch.setattr(compare.run.execution, "build_instance", fail)
     assert plant_links(records) == {("paper", 8, 0.995): 11.5}
 
 
 def test_designs_frame_of_records_has_the_columns_of_the_store_and_of_dict_rows(tmp_path):
     pytest.importorskip("pandas")
-    from compare.export import designs_frame
+    from compare.run.export import designs_frame
 
     with _store(tmp_path / "s.sqlite", facts=True) as store:
         records = store.records()

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from tiny_specs import tiny_spec  # tests/tiny_specs.py
 
-from compare.report import aggregate, budget_costs, pareto_front, plant_links, plot_cost_vs_links
+from compare.report.write import aggregate, budget_costs, pareto_front, plant_links, plot_cost_vs_links
 
 INST = [{"family": "paper", "seed": s, "n": 8, "degree": 4, "a_norm": 1.05, "b_norm": 1.0, "hops": 3, "horizon": 10}
         for s in range(3)]
@@ -39,7 +39,7 @@ def test_budget_costs_take_best_design_within_budget_per_instance():
 
 
 def test_plant_boundary_and_plot_handles():
-    from compare.records import Records, canonical_key
+    from compare.run.records import Records, canonical_key
 
     facts = {canonical_key(inst): {"n": 8, "plant_links": 20 + i, "comm_links": 30} for i, inst in enumerate(INST)}
     records = Records.from_rows([_rec(inst, "m", 5, 1.2, info="delayed") for inst in INST], facts)
@@ -70,7 +70,7 @@ def test_qi_boundary_only_with_a_delayed_method_and_an_excess_cost_axis_in_perce
 
 
 def test_single_setting_methods_at_the_same_link_count_are_dodged():
-    from compare.cost_links import _dodge
+    from compare.report.cost_links import _dodge
 
     records = [_rec(inst, label, 0, 1.3) for inst in INST for label in ("autonomous", "decentralized")]
     points = aggregate(records)
@@ -126,7 +126,7 @@ def test_a_summary_marker_is_drawn_only_on_or_above_its_methods_front():
 
 def test_topology_path_prefers_the_papers_a_norm_then_the_longest_path_and_draws_each_design():
     from codesign import paper_instance
-    from compare.topologies import plot_topology_path, topology_path_records
+    from compare.report.topologies import plot_topology_path, topology_path_records
 
     records = []
     for seed, betas in ((0, (0.1, 1.0)), (1, (0.1, 1.0, 10.0))):
@@ -166,7 +166,7 @@ def test_topology_path_prefers_the_papers_a_norm_then_the_longest_path_and_draws
 
 
 def test_report_counts_runs_and_shows_how_to_regenerate(tmp_path):
-    from compare.report import write_report
+    from compare.report.write import write_report
 
     records = []
     for i, inst in enumerate(INST):
@@ -186,7 +186,7 @@ def test_report_counts_runs_and_shows_how_to_regenerate(tmp_path):
 
 
 def test_params_column_rounds_grid_values_and_keeps_the_rest():
-    from compare.report_tables import _params_text
+    from compare.report.tables import _params_text
 
     text = _params_text({"gamma": 0.0021544346900318843, "reweight": 3, "rho": 100.0, "end": float("inf"),
                          "g": "plant"})
@@ -223,7 +223,7 @@ def test_off_scale_values_get_one_label_per_value_and_neighbours_go_a_row_lower(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from compare.cost_links import _mark_off_scale
+    from compare.report.cost_links import _mark_off_scale
 
     fig, ax = plt.subplots(figsize=(4, 3))
     ax.set_xscale("symlog", linthresh=1.0)
@@ -252,7 +252,7 @@ def test_off_scale_values_get_one_label_per_value_and_neighbours_go_a_row_lower(
 def test_the_qi_boundary_is_named_in_the_legend_not_under_the_markers():
     import matplotlib.pyplot as plt
 
-    from compare.figures import BOUNDARY_LABEL, boundary_handles, draw_boundary
+    from compare.report.figures import BOUNDARY_LABEL, boundary_handles, draw_boundary
 
     fig, (left, right) = plt.subplots(1, 2)
     assert boundary_handles([left, right]) == []  # no boundary drawn: no entry
@@ -266,8 +266,8 @@ def test_the_qi_boundary_is_named_in_the_legend_not_under_the_markers():
 
 
 def test_report_says_how_many_simulated_costs_were_refined_on_importance_draws():
-    from compare.records import Records
-    from compare.report_tables import precision_text
+    from compare.run.records import Records
+    from compare.report.tables import precision_text
 
     def row(stderr, estimator, importance):
         return {"cost": 2.0, "cost_stderr": stderr, "cost_kind": "simulated", "status": "optimal",
@@ -284,8 +284,8 @@ def test_report_says_how_many_simulated_costs_were_refined_on_importance_draws()
 
 
 def test_report_warns_about_costs_that_stay_imprecise_after_refinement():
-    from compare.records import Records
-    from compare.report_tables import uncertain_text
+    from compare.run.records import Records
+    from compare.report.tables import uncertain_text
 
     def row(label, stderr, a_norm):
         return {"label": label, "cost": 2.0, "cost_stderr": stderr, "cost_kind": "simulated", "status": "optimal",
@@ -306,7 +306,7 @@ def test_every_built_in_marker_is_visible_on_white():
     "x" vanished from every figure."""
     from matplotlib.markers import MarkerStyle
 
-    from compare.styles import METHOD_STYLES, Style
+    from compare.report.styles import METHOD_STYLES, Style
 
     assert Style("#555555", "x", "none").edge == "#555555"
     assert Style("#1f77b4", "o").edge == "white"
@@ -322,10 +322,10 @@ def test_both_cost_figures_draw_a_method_s_marker_edge_alike():
     its one Style (they used to decide the width each on their own: 0.6 and 0.5 points)."""
     from matplotlib.lines import Line2D
 
-    from compare.figures import plot_budget_fronts
-    from compare.records import Records
-    from compare.report import budget_fronts, label_styles
-    from compare.styles import style_for
+    from compare.report.figures import plot_budget_fronts
+    from compare.run.records import Records
+    from compare.report.write import budget_fronts, label_styles
+    from compare.report.styles import style_for
 
     records = []
     for method, links in (("sparse_admm", (20, 40)), ("autonomous", (0,)), ("lqr", (56,))):
@@ -349,7 +349,7 @@ def test_both_cost_figures_draw_a_method_s_marker_edge_alike():
 
 
 def test_the_answer_comes_before_the_contents_on_the_page(tmp_path):
-    from compare.html import render_html
+    from compare.report.html import render_html
 
     page = render_html("# Title\n\nThe answer, first.\n\n## Findings\n\ntext\n\n## More\n\nx\n", tmp_path, "Title")
     assert page.index("The answer, first.") < page.index('<nav class="toc">') < page.index('id="findings"')

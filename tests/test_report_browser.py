@@ -1,4 +1,4 @@
-"""The interactive report page (compare.html, compare.interactive), checked in a real headless Chromium.
+"""The interactive report page (compare.report.html, compare.report.interactive), checked in a real headless Chromium.
 
 The page-building checks run everywhere; the browser checks skip, saying so, where
 Playwright or a Chromium is missing.
@@ -13,14 +13,14 @@ import pytest
 
 pytest.importorskip("plotly", reason="plotly is not installed")
 
-from compare.cost_links import aggregate  # noqa: E402
-from compare.figures import BOUNDARY_LABEL, OFF_SCALE  # noqa: E402
-from compare.html import PLOTLY_JS, render_html, write_plotly_js  # noqa: E402
-from compare.interactive import KINDS, budget_fronts_figure, cost_links_figure, figure_div  # noqa: E402
-from compare.records import Records, canonical_key  # noqa: E402
-from compare.report import plant_links  # noqa: E402
-from compare.statistics import budget_fronts  # noqa: E402
-from compare.styles import label_styles  # noqa: E402
+from compare.report.cost_links import aggregate  # noqa: E402
+from compare.report.figures import BOUNDARY_LABEL, OFF_SCALE  # noqa: E402
+from compare.report.html import PLOTLY_JS, render_html, write_plotly_js  # noqa: E402
+from compare.report.interactive import KINDS, budget_fronts_figure, cost_links_figure, figure_div  # noqa: E402
+from compare.run.records import Records, canonical_key  # noqa: E402
+from compare.report.write import plant_links  # noqa: E402
+from compare.report.statistics import budget_fronts  # noqa: E402
+from compare.report.styles import label_styles  # noqa: E402
 
 # A 1x1 PNG, enough for the static figure files the page links to.
 _PNG = bytes.fromhex("89504e470d0a1a0a0000000d4948445200000001000000010806000000"
@@ -180,7 +180,7 @@ def _links_costs(fig, kind):
 
 
 def test_links_and_costs_come_back_from_the_plotly_json():
-    """The contract of compare.interactive's docstring: x = links (per node) + offset, y = excess cost (floored)."""
+    """The contract of compare.report.interactive's docstring: x = links (per node) + offset, y = excess cost (floored)."""
     records = synthetic_records()
     styles = label_styles(records)
     fig = cost_links_figure(records, styles, boundaries=plant_links(records))

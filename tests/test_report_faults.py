@@ -10,9 +10,9 @@ import json
 
 import pytest
 
-from compare.folder import read_folder
-from compare.records import Records, canonical_key
-from compare.report import plant_links, write_report
+from compare.report.folder import read_folder
+from compare.run.records import Records, canonical_key
+from compare.report.write import plant_links, write_report
 
 BASE = {"family": "paper", "degree": 4, "b_norm": 1.0, "hops": 3, "horizon": 10}
 HUGE = {**BASE, "n": 100000, "a_norm": 0.995, "seed": 0}
@@ -114,12 +114,12 @@ PATH_META = {"method:path_method": {"produces": ["topology_path"], "path_param":
 
 
 def _ring_drawing(n: int) -> dict:
-    """A stored drawing (:func:`compare.topologies.drawing_facts`) of a ring of ``n`` nodes, made without a build."""
+    """A stored drawing (:func:`compare.report.topologies.drawing_facts`) of a ring of ``n`` nodes, made without a build."""
     from types import SimpleNamespace
 
     import numpy as np
 
-    from compare.drawing import drawing_facts
+    from compare.run.drawing import drawing_facts
 
     ring = np.eye(n) + np.eye(n, k=1) + np.eye(n, k=-1) + np.eye(n, k=n - 1) + np.eye(n, k=1 - n)
     A = 0.4 * ring + 0.01 * np.diag(np.arange(n))
@@ -173,7 +173,7 @@ def test_the_topology_figure_is_drawn_from_the_stored_drawing_and_again_from_the
 
 
 def test_a_nan_a_norm_is_one_panel_that_sorts_after_every_number():
-    from compare.records import panel_key
+    from compare.run.records import panel_key
 
     specs = [dict(NAN, seed=s, a_norm=float("nan")) for s in range(2)]  # two NaN objects
     records = Records.from_rows([_row(spec, "lqr", status="failed", message=NAN_MESSAGE) for spec in specs]

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compare.styles import METHOD_STYLES, style_for
+from compare.report.styles import METHOD_STYLES, style_for
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
 SHIPPED = ("quick", "scale", "systems", "table1", "tradeoff", "small", "benchmark-systems", "scale-large", "power",
@@ -63,9 +63,9 @@ def test_colours_are_grouped_by_information_model_and_pairs_are_unique():
 def test_no_marker_of_the_cost_figure_stands_at_a_link_count_no_design_has():
     """Rebuild quick's cost-versus-links figure from its folder: every marker sits at a link count some design of
     the same method and panel has."""
-    from compare.cost_links import aggregate, plot_cost_vs_links
-    from compare.folder import read_folder
-    from compare.report import report_records
+    from compare.report.cost_links import aggregate, plot_cost_vs_links
+    from compare.report.folder import read_folder
+    from compare.report.write import report_records
 
     records = report_records(read_folder(REPORTS / "quick").records)
     points = aggregate(records)
@@ -83,7 +83,7 @@ def test_no_marker_of_the_cost_figure_stands_at_a_link_count_no_design_has():
                 assert x in counts, (panel, label, x)
                 checked += 1
     # Every setting drawn (on or above its method's front, within the axis) was checked, and there are some.
-    from compare.figures import OFF_SCALE
+    from compare.report.figures import OFF_SCALE
 
     assert checked == sum(p.ok > 0 and p.reached and p.cost[1] <= OFF_SCALE for p in points) >= 10
 

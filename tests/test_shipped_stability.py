@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from codesign.status import STABILITY_TOL, USABLE
-from compare.folder import read_folder
+from compare.report.folder import read_folder
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
 SHIPPED = sorted(p.name for p in REPORTS.iterdir() if (p / "runs.csv").exists())

@@ -28,7 +28,7 @@ from codesign import (
     static_gain_cost,
     vet_solver_cost,
 )
-from compare.registry import get_method
+from compare.run.registry import get_method
 
 # The package exports the function ``sls``, which hides the module of the same name.
 sls_module = importlib.import_module("baselines.sls")

@@ -97,7 +97,7 @@ def test_bad_inputs_raise(inst):
 
 def test_node_blocks_match_the_joint_qp():
     """Two states and one input per node (mass-spring): columns follow the nodes' hop distances."""
-    from compare.families.mass_spring import mass_spring_instance
+    from compare.run.families.mass_spring import mass_spring_instance
 
     chain = mass_spring_instance(5, seed=0, horizon=10)
     local = sls_local(chain, locality=chain.nodes, fir=6)

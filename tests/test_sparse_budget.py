@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-import compare.registry  # noqa: F401  (the built-ins: importing a family registers no method)
+import compare.run.registry  # noqa: F401  (the built-ins: importing a family registers no method)
 from codesign import get_method, paper_instance
-from compare.families.swing_grid import swing_grid_instance
+from compare.run.families.swing_grid import swing_grid_instance
 
 
 @pytest.fixture(scope="module")

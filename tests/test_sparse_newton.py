@@ -107,7 +107,7 @@ def test_bad_input_is_refused_by_name(paper12):
 def test_node_blocks_meet_the_group_optimality_conditions_and_admm():
     """Nodes with two states (the mass-spring chain): the group-ℓ1 conditions per node block against scipy's
     gradient, and the same node patterns as ADMM at every γ of the default grid."""
-    from compare.families.mass_spring import mass_spring_instance
+    from compare.run.families.mass_spring import mass_spring_instance
 
     instance = mass_spring_instance(6)
     assert not instance.scalar_nodes

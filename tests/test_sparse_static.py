@@ -359,9 +359,9 @@ def test_user_grid_is_closed_by_the_diagonal_gain(name):
 
 
 def test_registry_and_preset():
-    from compare.registry import get_method
+    from compare.run.registry import get_method
 
-    preset = Path(__file__).resolve().parents[1] / "compare" / "presets" / "baselines-small.toml"
+    preset = Path(__file__).resolve().parents[1] / "compare" / "run" / "presets" / "baselines-small.toml"
     spec = tomllib.loads(preset.read_text())
     assert spec["name"] == "baselines-small"
     names = [entry["method"] for entry in spec["methods"]]

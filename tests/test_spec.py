@@ -87,7 +87,7 @@ def test_a_folder_named_like_a_preset_does_not_hide_it(tmp_path, monkeypatch):
 def test_default_validation_size_is_the_evaluators():
     """The harness scores on the draws the GRNN and GCNN already scored themselves on (no second rollout)."""
     from codesign.evaluation import VALIDATION_SIZE
-    from compare.spec import EvaluationSpec
+    from compare.run.spec import EvaluationSpec
 
     assert EvaluationSpec().validation_size == VALIDATION_SIZE
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from compare.statistics import budget_fronts, median_interval, paired_comparisons, paired_difference
+from compare.report.statistics import budget_fronts, median_interval, paired_comparisons, paired_difference
 
 INST = [{"family": "paper", "seed": s, "n": 8, "a_norm": 1.05} for s in range(4)]
 

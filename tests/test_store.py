@@ -38,7 +38,7 @@ def test_run_store_and_resume(tmp_path):
 
 
 _FREED_THEN_MEASURED = """
-from compare import execution
+from compare.run import execution
 blocks = [bytearray(100_000) for _ in range(5000)]  # 500 MB in blocks malloc keeps on its heap
 del blocks[:-1]  # the last one stays, so the heap cannot simply shrink from its end
 with execution._measured() as watch:
@@ -74,8 +74,8 @@ def test_a_store_from_before_peak_memory_gains_the_column_and_keeps_its_runs(tmp
 
 
 def test_a_store_from_before_scoring_seconds_and_baselines_gains_them_unknown(tmp_path):
-    from compare.compute_report import NOT_MEASURED, compute_cells, compute_markdown
-    from compare.store import SCHEMA_VERSION
+    from compare.report.compute_report import NOT_MEASURED, compute_cells, compute_markdown
+    from compare.run.store import SCHEMA_VERSION
 
     path = tmp_path / "old.sqlite"
     spec = parse_spec(SPEC)
@@ -142,7 +142,7 @@ def test_noise_scenario_is_recorded(tmp_path):
 
 
 def test_method_exception_becomes_failed_design(tmp_path, monkeypatch):
-    import compare.execution as execution
+    import compare.run.execution as execution
 
     def boom(*args, **kwargs):
         raise RuntimeError("solver exploded")

@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from compare.topologies import SPY_ABOVE, _collinear, node_order, plot_topology_path, topology_caption  # noqa: E402
+from compare.report.topologies import SPY_ABOVE, _collinear, node_order, plot_topology_path, topology_caption  # noqa: E402
 
 
 def _chain(n: int, hops: int = 1, shuffle: int | None = None):
@@ -91,9 +91,9 @@ def test_the_stored_drawing_gives_the_built_instances_arrays_exactly(spec):
     """Through the runner's facts and JSON (as the store keeps them), bit for bit the built instance's drawing."""
     import json
 
-    from compare.records import InstanceRecord
-    from compare.runner import build_instance, instance_facts
-    from compare.drawing import InstanceDrawing, node_colours
+    from compare.run.records import InstanceRecord
+    from compare.run.runner import build_instance, instance_facts
+    from compare.run.drawing import InstanceDrawing, node_colours
 
     instance = build_instance(spec)
     stored = json.loads(json.dumps(instance_facts(instance)))
@@ -116,8 +116,8 @@ def test_the_stored_drawing_gives_the_built_instances_arrays_exactly(spec):
 def test_an_instance_and_its_stored_drawing_draw_the_same_figure():
     import json
 
-    from compare.runner import build_instance
-    from compare.drawing import InstanceDrawing, drawing_facts
+    from compare.run.runner import build_instance
+    from compare.run.drawing import InstanceDrawing, drawing_facts
 
     instance = build_instance(MASS_SPRING)
     drawing = InstanceDrawing.from_facts(json.loads(json.dumps(drawing_facts(instance))))
@@ -133,7 +133,7 @@ def test_an_instance_and_its_stored_drawing_draw_the_same_figure():
 
 
 def test_no_drawing_is_stored_above_the_node_limit():
-    from compare.drawing import DRAWN_NODES_AT_MOST, drawing_facts
+    from compare.run.drawing import DRAWN_NODES_AT_MOST, drawing_facts
 
     assert drawing_facts(SimpleNamespace(nodes=DRAWN_NODES_AT_MOST + 1)) is None
     small = _chain(5)
@@ -150,7 +150,7 @@ def test_no_drawing_is_stored_above_the_node_limit():
     ({"plant": [[0]], "comm": [[True]], "colours": [1.0]}, "comm row 0"),
 ])
 def test_a_malformed_stored_drawing_is_refused_naming_the_problem(facts, problem):
-    from compare.drawing import InstanceDrawing
+    from compare.run.drawing import InstanceDrawing
 
     with pytest.raises(ValueError, match="a stored drawing") as error:
         InstanceDrawing.from_facts(facts)
@@ -158,7 +158,7 @@ def test_a_malformed_stored_drawing_is_refused_naming_the_problem(facts, problem
 
 
 def test_an_instance_record_carries_its_drawing_and_is_still_keyed_by_its_spec_alone():
-    from compare.records import InstanceRecord
+    from compare.run.records import InstanceRecord
 
     facts = {"n": 5, "plant_links": 8, "comm_links": 8}
     drawn = InstanceRecord.from_spec(PAPER, {**facts, "drawing": _chain_drawing(5)})
@@ -171,6 +171,6 @@ def test_an_instance_record_carries_its_drawing_and_is_still_keyed_by_its_spec_a
 
 
 def _chain_drawing(n: int) -> dict:
-    from compare.drawing import drawing_facts
+    from compare.run.drawing import drawing_facts
 
     return drawing_facts(_chain(n))

@@ -2,8 +2,8 @@
 
 import pytest
 
-from compare.findings import PRACTICAL_MARGIN, select_comparisons
-from compare.records import Records
+from compare.report.findings import PRACTICAL_MARGIN, select_comparisons
+from compare.run.records import Records
 
 A, B = "Sparse K, delayed (l1)", "GRNN-Sparse"
 

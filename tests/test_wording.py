@@ -9,13 +9,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.colors import to_hex  # noqa: E402
 
-from compare.findings import select_comparisons, unresolved  # noqa: E402
-from compare.findings_text import EQUAL_WORDS, complete_plant_panels, findings_markdown  # noqa: E402
-from compare.forest import plot_forest  # noqa: E402
-from compare.pattern_gaps import pattern_gap_section  # noqa: E402
-from compare.records import Records, canonical_key  # noqa: E402
-from compare.report import report_records  # noqa: E402
-from compare.report_tables import canonical_label  # noqa: E402
+from compare.report.findings import select_comparisons, unresolved  # noqa: E402
+from compare.report.findings_text import EQUAL_WORDS, complete_plant_panels, findings_markdown  # noqa: E402
+from compare.report.forest import plot_forest  # noqa: E402
+from compare.report.pattern_gaps import pattern_gap_section  # noqa: E402
+from compare.run.records import Records, canonical_key  # noqa: E402
+from compare.report.write import report_records  # noqa: E402
+from compare.report.tables import canonical_label  # noqa: E402
 
 SD, TANH = "Sparse delayed K (l1)", "GRNN-Sparse"
 SLS_PARAMS = {"act_delay": 1, "fir": None, "horizon": 50, "speed": 1.0}

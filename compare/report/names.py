@@ -1,0 +1,24 @@
+"""Method labels as the answer names them: without their trailing training settings where that stays unambiguous.
+
+Shared by :mod:`compare.report.answer` and :mod:`compare.report.ladder`, which name the same methods.
+"""
+
+from __future__ import annotations
+
+import re
+
+__all__ = ["SETTINGS_SUFFIX", "short_names"]
+
+#: A trailing parenthesis that names training settings, not the design: "(β path, 150 steps, 3 hops)".
+SETTINGS_SUFFIX = re.compile(r" \((β path|γ path|\d+ steps)[^()]*\)$")
+
+
+def short_names(labels) -> dict[str, str]:
+    """Label -> its name without a trailing parenthesis of training settings ("GRNN-Sparse (β path)" ->
+    "GRNN-Sparse"), where that leaves no two labels of the report one name."""
+    labels = sorted(set(labels))
+    short = {x: SETTINGS_SUFFIX.sub("", x) for x in labels}
+    taken: dict[str, int] = {}
+    for x in short.values():
+        taken[x] = taken.get(x, 0) + 1
+    return {x: s if s == x or (taken[s] == 1 and s not in labels) else x for x, s in short.items()}

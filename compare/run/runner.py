@@ -1,0 +1,360 @@
+"""Expanding a spec into runs and executing them into the store.
+
+Runs execute in worker processes (:mod:`compare.run.pool` locally, or a dask
+cluster), each limited to one BLAS/torch thread so that N workers use N cores;
+what a worker does with a task is :mod:`compare.run.execution`. Only this (client)
+process writes to the store, one transaction per finished run. Runs already in
+the store are skipped, so an interrupted sweep resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import pickle
+import time
+import uuid
+from collections import Counter
+from concurrent.futures import FIRST_COMPLETED, Executor, ProcessPoolExecutor, wait
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+from tqdm.auto import tqdm
+
+from codesign.status import OPTIMAL
+
+from .environment import environment
+from .execution import (  # noqa: F401 - re-exported: the runner's public names
+    THREAD_VARS,
+    ExecutorError,
+    RunResult,
+    WorkerSetupError,
+    build_instance,
+    execute_run,
+    execute_task,
+    execute_task_sendable,
+    failed_run,
+    instance_facts,
+    limit_threads,
+    reissue_warnings,
+    sendable_results,
+)
+from .fingerprint import fingerprint_details
+from .meta import MetaKind, meta_key
+from .pool import WorkerPool
+from .records import canonical_key
+from .registry import get_method
+from .spec import ExperimentSpec, Run
+from .store import Store
+
+__all__ = [
+    "build_instance",
+    "execute_run",
+    "execute_task",
+    "plan_tasks",
+    "run_experiment",
+    "RunSummary",
+    "make_executor",
+    "open_executor",
+    "StoreBusy",
+    "instance_facts",
+    "failed_run",
+]
+
+def plan_tasks(runs: list[Run]) -> list[list[Run]]:
+    """Group runs into tasks: batched methods get up to ``batch_size`` runs per task.
+
+    A task holds runs on instances of one family and size only: a batch's seconds are
+    shared equally among its runs, so mixing sizes would blur the time per design at
+    each N that the report's compute section draws.
+    """
+    tasks, groups = [], {}
+    for run in runs:
+        method = get_method(run.method)
+        if method.batch is None:
+            tasks.append([run])
+        else:
+            size_key = (run.instance.get("family"), run.instance.get("n"))
+            groups.setdefault((run.method, json.dumps(size_key)), []).append(run)
+    for (name, _), group in groups.items():
+        size = get_method(name).batch_size
+        tasks += [group[i:i + size] for i in range(0, len(group), size)]
+    # Largest tasks first keeps workers busy to the end.
+    return sorted(tasks, key=len, reverse=True)
+
+
+def make_executor(workers: int) -> Executor:
+    """A process pool of ``workers`` single-threaded workers (spawned, not forked; see :func:`limit_threads`)."""
+    # The pool starts its processes when work is submitted, so the limits are set in each
+    # worker by the initializer rather than through this process's environment.
+    return ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=limit_threads,
+    )
+
+
+@contextmanager
+def open_executor(address: str, workers: int):
+    """An executor for ``address``, closed on exit.
+
+    ``"process"`` (the default) is a local :class:`~compare.run.pool.WorkerPool` of ``workers``
+    processes (a worker that dies or overruns its time fails its own run only);
+    ``"dask-local"`` starts a local dask.distributed cluster of ``workers``
+    single-threaded worker processes; ``"dask://HOST:PORT"`` (or ``tcp://``)
+    connects to a running scheduler. Dask runs go through the client's
+    ``concurrent.futures`` interface; only this process writes to the store.
+    """
+    if address == "process":
+        with WorkerPool(workers) as pool:
+            yield pool
+        return
+    if address == "dask-local" or address.startswith(("dask://", "tcp://")):
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:  # pragma: no cover
+            raise ExecutorError("dask.distributed is not installed: pip install 'dask[distributed]'") from None
+        cluster = None
+        if address == "dask-local":
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40)
+            client = Client(cluster)
+        else:
+            target = "tcp://" + address.split("://", 1)[1]
+            try:
+                client = Client(target, timeout="10s")
+            except (OSError, TimeoutError) as exc:
+                raise ExecutorError(f"cannot reach the dask scheduler at {target}: {exc}") from None
+        try:
+            client.run(limit_threads)  # dask's nanny covers BLAS and OpenMP, not rayon
+            yield client.get_executor(pure=False)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        return
+    raise ExecutorError(
+        f"unknown executor {address!r}: use 'process', 'dask-local' or 'dask://HOST:PORT'"
+    )
+
+
+@dataclass
+class RunSummary:
+    """What a call of :func:`run_experiment` did."""
+
+    total: int
+    already_stored: int
+    computed: int = 0
+    by_others: int = 0
+    statuses: Counter = field(default_factory=Counter)
+    seconds: float = 0.0
+
+    def __str__(self) -> str:
+        failed = {k: v for k, v in self.statuses.items() if k != OPTIMAL}
+        parts = [f"{self.total} runs: {self.computed} computed, {self.already_stored} already stored"]
+        if self.by_others:
+            parts[0] += f", {self.by_others} computed by another process"
+        if failed:
+            parts.append("non-optimal designs: " + ", ".join(f"{v} {k}" for k, v in sorted(failed.items())))
+        parts.append(f"{self.seconds:.1f} s")
+        return "; ".join(parts)
+
+
+class StoreBusy(RuntimeError):
+    """Runs of the experiment are being computed by another process and ``wait`` is False."""
+
+
+def _drain(pool: Executor, tasks: list[list[Run]], plugins, record) -> None:
+    """Run ``tasks`` on a ``concurrent.futures`` executor (dask's, or the caller's).
+
+    A task whose future fails (its results would not unpickle, its worker died) is
+    recorded as failed, run by run; a worker that cannot load the methods stops all.
+    Results travel pickled by the worker (:func:`compare.run.execution.sendable_results`), so
+    that a design which cannot be serialized is its run's failure, not a task the
+    executor retries for ever. Per-run time limits need the local
+    :class:`~compare.run.pool.WorkerPool`.
+    """
+    futures = {pool.submit(execute_task_sendable, task, plugins): task for task in tasks}
+    warned: dict = {}
+    try:
+        remaining = set(futures)
+        while remaining:
+            finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
+            for future in finished:
+                task, caught = futures[future], []
+                try:
+                    sent, caught = future.result()
+                    results = [pickle.loads(result) for result in sent]
+                except WorkerSetupError:
+                    raise
+                except Exception as exc:  # noqa: BLE001 - the executor's failure is these runs' status
+                    message = f"the executor could not run it: {type(exc).__name__}: {exc}"
+                    results = [RunResult(failed_run(run, message), 0.0) for run in task]
+                for run, result in zip(task, results):
+                    record(run, *result)
+                reissue_warnings(caught, warned)  # after recording: a warning filtered to "error" loses no run
+    except BaseException:
+        for future in futures:
+            future.cancel()
+        raise
+
+
+#: Instance facts written per transaction while planning: few commits, and an interrupted plan keeps its batches.
+PLAN_BATCH = 1000
+
+
+def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store, progress: bool = False) -> None:
+    """Store what the report needs beside the runs: the spec, methods, fingerprints and instance facts.
+
+    Each instance is built once here, in this process, for its facts (a few ms each at
+    small sizes); a bar shows it when that takes more than a couple of seconds, and the
+    facts are written :data:`PLAN_BATCH` instances per transaction, not one commit each.
+    """
+    entries = {meta_key(MetaKind.SPEC, spec.name): spec.source,
+               meta_key(MetaKind.SECTIONS, spec.name): list(spec.sections),
+               meta_key(MetaKind.PAIRS, spec.name): [list(pair) for pair in spec.pairs]}
+    for name in dict.fromkeys(run.method for run in runs):
+        m = get_method(name)
+        details = fingerprint_details(m.modules)
+        entries[meta_key(MetaKind.METHOD, name)] = {
+            "label": m.label, "summary": m.summary, "produces": list(m.produces), "path_param": m.path_param,
+            "fingerprint": details["fingerprint"]}
+        entries[meta_key(MetaKind.FINGERPRINT, details["fingerprint"])] = {
+            "modules": details["modules"], "versions": details["versions"]}
+    store.set_metas(entries)
+    store.set_members(spec.name, [run.key for run in runs])
+    known = store.instance_facts()
+    # "radius" missing: new, or stored before the systems table's facts.
+    todo = [spec_dict for key, spec_dict in {canonical_key(run.instance): run.instance for run in runs}.items()
+            if "radius" not in known.get(key, {})]
+    batch = []
+    with tqdm(todo, desc=f"{spec.name}: planning", unit="instance", disable=not progress, delay=2.0) as bar:
+        for spec_dict in bar:
+            try:
+                batch.append((spec_dict, instance_facts(build_instance(spec_dict))))
+            except Exception:  # the instance's runs record the failure; the report draws without its facts
+                pass
+            if len(batch) >= PLAN_BATCH:
+                store.set_metas(store.instance_facts_entries(batch))
+                batch = []
+    if batch:
+        store.set_metas(store.instance_facts_entries(batch))
+
+
+def run_experiment(
+    spec: ExperimentSpec,
+    store: Store,
+    *,
+    workers: int = 1,
+    executor: Executor | str | None = None,
+    progress: bool = True,
+    wait_for_others: bool = True,
+    poll: float = 1.0,
+) -> RunSummary:
+    """Execute every run of ``spec`` not yet in ``store``.
+
+    Parameters
+    ----------
+    spec : ExperimentSpec
+    store : Store
+        Finished runs are committed one by one as they complete.
+    workers : int
+        Worker processes; 1 runs everything in this process.
+    executor : concurrent.futures.Executor or str, optional
+        An executor to submit runs to, or an address for :func:`open_executor`
+        (``"process"``, ``"dask-local"``, ``"dask://HOST:PORT"``). By default a
+        local process pool of ``workers`` processes (none when ``workers == 1``).
+    progress : bool
+        Show a tqdm progress bar.
+    wait_for_others : bool
+        Runs that another live process has claimed on the same store are left to
+        it; True waits for them (so the report is complete), False raises
+        :class:`StoreBusy` once this process has computed its own share.
+    poll : float
+        Seconds between looks at the store while waiting.
+    """
+    start = time.perf_counter()
+    runs = list({run.key: run for run in spec.runs()}.values())
+    _record_meta(spec, runs, store, progress)
+    limits = store.timed_out()
+    # A run stored as stopped at its time limit is tried again when the spec now gives it longer.
+    store.forget(run.key for run in runs if run.key in limits
+                 and (getattr(run, "timeout", None) or float("inf")) > limits[run.key])
+    done = store.done_keys()
+    pending = [run for run in runs if run.key not in done]
+    store.relabel({run.key: run.label for run in runs if run.key in done})
+    store.redescribe({run.key: run.instance for run in runs if run.key in done})
+    summary = RunSummary(total=len(runs), already_stored=len(runs) - len(pending))
+    bar = tqdm(total=len(pending), desc=f"{spec.name}", unit="run", disable=not progress or not pending)
+    owner = uuid.uuid4().hex
+
+    def record(run, designs, seconds, peak_mb=None, scoring_seconds=None, baseline_mb=None):
+        # The fields of a compare.run.execution.RunResult, in its order.
+        store.add_run(run, designs, experiment=spec.name, seconds=seconds, peak_mb=peak_mb,
+                      scoring_seconds=scoring_seconds, baseline_mb=baseline_mb, owner=owner)
+        summary.computed += 1
+        summary.statuses.update(d.status for d in designs)
+        bar.update(1)
+
+    running: Counter = Counter()
+
+    def show(runs, sign):
+        for run in runs:
+            running[run.method] += sign
+        bar.set_postfix_str(", ".join(f"{m} ×{k}" for m, k in sorted(running.items()) if k > 0), refresh=True)
+
+    def drain(pool, tasks):
+        if isinstance(pool, WorkerPool):
+            pool.drain(tasks, spec.plugins, record, on_start=lambda runs: show(runs, 1),
+                       on_finish=lambda runs: show(runs, -1))
+        else:
+            _drain(pool, tasks, spec.plugins, record)
+
+    def compute(todo):
+        tasks = plan_tasks(todo)
+        if executor is None and workers <= 1:
+            for task in tasks:
+                show(task, 1)
+                # Through pickle as in a worker: a design that could not leave one fails here too.
+                for run, result in zip(task, sendable_results(task, execute_task(task))):
+                    record(run, *pickle.loads(result))
+                show(task, -1)
+        elif isinstance(executor, (Executor, WorkerPool)):
+            drain(executor, tasks)
+        else:
+            with open_executor(executor or "process", workers) as pool:
+                drain(pool, tasks)
+
+    if pending:
+        executor_name = (executor if isinstance(executor, str)
+                         else "process" if executor is None or isinstance(executor, WorkerPool)
+                         else type(executor).__name__)
+        store.set_meta(meta_key(MetaKind.ENVIRONMENT, spec.name),
+                       environment(1 if executor is None and workers <= 1 else workers, executor_name))
+    told = False
+    try:
+        while pending:
+            mine = set(store.claim([run.key for run in pending], owner))
+            if mine:
+                compute([run for run in pending if run.key in mine])
+            stored = store.done_keys()
+            left = [run for run in pending if run.key not in stored]
+            summary.by_others += len(pending) - len(left) - len(mine & stored)
+            bar.update(len(pending) - len(left) - len(mine & stored))
+            pending = left
+            if not pending:
+                break
+            others = {store.claims().get(run.key, (None, "?", 0))[1:] for run in pending}
+            where = ", ".join(f"pid {pid} on {host}" for host, pid in sorted(others))
+            if not wait_for_others:
+                raise StoreBusy(f"{len(pending)} runs are being computed by another process ({where}) "
+                                f"on {store.path}; run again when it has finished")
+            if not told:
+                bar.write(f"waiting for {len(pending)} runs being computed by another process ({where})")
+                told = True
+            time.sleep(poll)
+    finally:
+        store.release(owner)
+        bar.close()
+        summary.seconds = time.perf_counter() - start
+    return summary

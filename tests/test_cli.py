@@ -126,7 +126,7 @@ def test_corrupt_store_is_reported_and_left_alone(tmp_path):
 
 
 def test_sigkill_mid_sweep_resumes_to_the_same_store(tmp_path):
-    many = SPEC.replace("seeds = 2", "seeds = 40").replace("horizon = 10", "horizon = 40")
+    many = SPEC.replace("seeds = 2", "seeds = 20").replace("horizon = 10", "horizon = 40")  # 120 runs
     spec = _write(tmp_path, many)
     out_killed, out_clean = tmp_path / "killed", tmp_path / "clean"
     args = [sys.executable, "-m", "compare.cli", "run", str(spec), "--workers", "1", "--no-progress"]
@@ -142,7 +142,7 @@ def test_sigkill_mid_sweep_resumes_to_the_same_store(tmp_path):
                 con.close()
             except sqlite3.OperationalError:
                 pass
-            if stored >= 20:
+            if stored >= 10:
                 break
         time.sleep(0.02)
     assert proc.poll() is None, "the sweep finished before it could be killed; make it longer"
@@ -151,11 +151,11 @@ def test_sigkill_mid_sweep_resumes_to_the_same_store(tmp_path):
     con = sqlite3.connect(db)
     partial = con.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
     con.close()
-    assert 20 <= partial < 240
+    assert 10 <= partial < 120
 
     resumed = _cli("run", str(spec), "--workers", "1", "--no-progress", "--out", str(out_killed))
     assert resumed.returncode == 0, resumed.stderr
-    assert f"{240 - partial} computed, {partial} already stored" in resumed.stdout
+    assert f"{120 - partial} computed, {partial} already stored" in resumed.stdout
     clean = _cli("run", str(spec), "--workers", "1", "--no-progress", "--out", str(out_clean))
     assert clean.returncode == 0
 
@@ -170,7 +170,7 @@ def test_sigkill_mid_sweep_resumes_to_the_same_store(tmp_path):
 
     killed_runs, killed_designs = dump(out_killed)
     clean_runs, clean_designs = dump(out_clean)
-    assert len(killed_runs) == 240 and len({k for k, _ in killed_runs}) == 240
+    assert len(killed_runs) == 120 and len({k for k, _ in killed_runs}) == 120
     assert killed_runs == clean_runs
     assert killed_designs == clean_designs
 

@@ -84,6 +84,9 @@ def _wait_for(path, seconds=60.0):
     raise TimeoutError(f"{path} did not appear in {seconds} s")
 
 
+# Slow: 26 s, most of it dask's own command-line tools starting up; the local-cluster test above
+# runs the same executor path in the default suite.
+@pytest.mark.slow
 def test_separate_process_dask_cluster_matches_the_process_pool(tmp_path):
     """`dask scheduler` + `dask worker` started by dask's own command-line tools, `compare run --executor dask://...`.
 

@@ -55,7 +55,7 @@ from ..run.records import Records, as_records
 from .decomposition import decomposition_sentences
 from .findings import ALPHA, BOUND_LABEL, Comparison, budgets_per_node, holm, sign_test
 from .ladder import ladder_lines
-from .names import short_names
+from .names import join_words, short_names
 
 __all__ = ["answer_lines", "MAX_SENTENCES", "FAILURE_COST", "DIFFICULTY_RATIO", "pooled_tests", "Pooled"]
 
@@ -80,10 +80,6 @@ def _count_of(k: int, n: int) -> str:
         return {1: "on its one instance", 2: "on both instances"}.get(n, f"on all {n} instances")
     return f"on {k} of {n} instance{'' if n == 1 else 's'}"
 
-
-def _join(parts: Sequence[str]) -> str:
-    parts = list(parts)
-    return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
 
 
 def _times(cost: float) -> str:
@@ -171,7 +167,7 @@ def failure_sentences(records, names: Mapping[tuple, str], flagged: set | None =
             groups.setdefault((status, value if status != "cost" else None, ran), []).append((label, value))
         for (status, k, ran), members in groups.items():
             members.sort()
-            who = _join([short[x] for x, _ in members])
+            who = join_words([short[x] for x, _ in members])
             if status == "cost":
                 parts += [f"{short[x]} costs about {_times(v)}" for x, v in members]
             else:
@@ -182,7 +178,7 @@ def failure_sentences(records, names: Mapping[tuple, str], flagged: set | None =
         low, high = min(working.values()), max(working.values())
         stays = (f"stays within {low:.1f}–{high:.1f} × LQR" if f"{low:.1f}" != f"{high:.1f}"
                  else f"stays at {low:.1f} × LQR")
-        out.append(f"On {names[panel]}{_radius(in_panel)}, {_join(parts)}, while {kind} {stays}.")
+        out.append(f"On {names[panel]}{_radius(in_panel)}, {join_words(parts)}, while {kind} {stays}.")
         flagged.update((panel, label) for label, *_ in failing)
     return out[:2]
 
@@ -221,7 +217,7 @@ def reproduction_sentences(records, meta=None, members=None) -> list[str]:
             where = (f"‖A‖₂ = {v.a_norm:g} " if first[0] else f"{v.a_norm:g} ") if several else ""
             first[0] = False
             parts.append(f"{where}({abs(v.z):.1f} SE)")
-        return f"{vs[0].label} at {_join(parts)}" if several else f"{vs[0].label} {_join(parts)}"
+        return f"{vs[0].label} at {join_words(parts)}" if several else f"{vs[0].label} {join_words(parts)}"
 
     def by_label(vs) -> list[str]:
         groups: dict[str, list] = {}
@@ -235,7 +231,7 @@ def reproduction_sentences(records, meta=None, members=None) -> list[str]:
     if not outside:
         return [head + "."]
     if noise:
-        head += (f", and of the {len(outside)} outside, {_join(by_label(noise))} "
+        head += (f", and of the {len(outside)} outside, {join_words(by_label(noise))} "
                  f"{'is' if len(noise) == 1 else 'are'} under 2 SE off")
     else:
         head += f", and {len(outside)} lie outside"
@@ -249,9 +245,9 @@ def reproduction_sentences(records, meta=None, members=None) -> list[str]:
     parts = []
     for reason, vs in reasons.items():
         if reason:
-            parts.append(f"{_join(by_label(vs))}, {reason}")
+            parts.append(f"{join_words(by_label(vs))}, {reason}")
     if "" in reasons:
-        parts.append(f"{_join(by_label(reasons['']))}, with no known cause")
+        parts.append(f"{join_words(by_label(reasons['']))}, with no known cause")
     top = beyond[0]
     sentences.append(f"Beyond that noise: {'; '.join(parts)} (docs/reproduction.md); the largest gap, "
                      f"{top.label} at ‖A‖₂ = {top.a_norm:g}, is our {top.statistic} {top.ours:.3f} against the "
@@ -372,7 +368,7 @@ def pooled_sentence(comparisons: Sequence[Comparison], order: Mapping,
                 continue
             also.append(f"{_subject(c.a, short)} ({t.instances} of {t.instances})")
     if also:
-        text += f"; so {'does' if len(also) == 1 else 'do'} {_join(also[:3])}"
+        text += f"; so {'does' if len(also) == 1 else 'do'} {join_words(also[:3])}"
     return text + ".", list(best.cells)
 
 

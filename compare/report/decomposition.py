@@ -42,6 +42,7 @@ import numpy as np
 from codesign.status import DIVERGED
 
 from .findings import is_sls_bound, is_unresolved
+from .names import join_words
 from ..run.records import Records, as_records
 from .statistics import Paired, best_within, paired_difference, panel_budgets
 from .styles import grnn_kinds
@@ -300,10 +301,6 @@ def _divergence_sentence(records: Records) -> str | None:
     return text + "."
 
 
-def _and(items) -> str:
-    items = list(items)
-    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
-
 
 def _nonlinearity_sentence(records: Records, system: tuple) -> str | None:
     nl = [x for x in nonlinearity(records) if x.system == system and x.arm == "paper" and x.paired.instances]
@@ -313,10 +310,10 @@ def _nonlinearity_sentence(records: Records, system: tuple) -> str | None:
     hurts = [x for x in nl if x.paired.low > 0]
     span = f"{min(x.paired.median for x in nl):+.4f} to {max(x.paired.median for x in nl):+.4f}"
     if helps:
-        verdict = (f"the tanh nonlinearity lowers the cost at {_and(_budget(x.budget) for x in helps)} "
+        verdict = (f"the tanh nonlinearity lowers the cost at {join_words(_budget(x.budget) for x in helps)} "
                    f"(tanh − linear medians {span} across budgets)")
     elif hurts:
-        verdict = (f"the tanh nonlinearity adds nothing: at {_and(_budget(x.budget) for x in hurts)} the "
+        verdict = (f"the tanh nonlinearity adds nothing: at {join_words(_budget(x.budget) for x in hurts)} the "
                    f"linear GRNN-Sparse costs less (tanh − linear medians {span} across budgets)")
     else:
         verdict = f"tanh and linear GRNN-Sparse cannot be told apart (tanh − linear medians {span}, every interval holding 0)"

@@ -25,6 +25,7 @@ from .findings import (
     Comparison,
     budgets_per_node,
 )
+from .names import join_words
 
 __all__ = ["findings_markdown", "complete_plant_panels", "repaired_instances", "EQUAL_WORDS", "number_text",
            "range_text", "side_of", "with_article", "short_label", "panel_names", "scope_text", "models_text"]
@@ -76,10 +77,6 @@ def _s(k: int) -> str:
     """The plural ending for a count of ``k``."""
     return "" if k == 1 else "s"
 
-
-def _join(parts: Sequence[str]) -> str:
-    parts = list(parts)
-    return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
 
 
 def _level(c: Comparison) -> str:
@@ -144,8 +141,8 @@ def _panel_list(panels: Sequence[tuple], names: Mapping) -> str:
     """"‖A‖₂ = 0.995 and 1.2" rather than repeating "‖A‖₂ =" for each."""
     labels = [names[p] for p in panels]
     if len(labels) > 1 and all(x.startswith(_NORM_PREFIX) and "," not in x for x in labels):
-        return _NORM_PREFIX + _join([x[len(_NORM_PREFIX):] for x in labels])
-    return _join(labels)
+        return _NORM_PREFIX + join_words([x[len(_NORM_PREFIX):] for x in labels])
+    return join_words(labels)
 
 
 def _in_panels(panels: Sequence[tuple], names: Mapping, every: bool = True) -> str:
@@ -162,7 +159,7 @@ def _budgets_phrase(budgets: Sequence, per_node: bool = False) -> str:
     """"at ≤ 20 and ≤ 60 links and overall" (overall: any number of links); "links per node" with ``per_node``."""
     finite = [f"≤ {b:g}" for b in budgets if b is not None]
     unit = "link" if [b for b in budgets if b is not None] == [1] else "links"
-    text = f"at {_join(finite)} {unit}{' per node' if per_node else ''}" if finite else ""
+    text = f"at {join_words(finite)} {unit}{' per node' if per_node else ''}" if finite else ""
     if None in budgets:
         text += (" and " if text else "") + "overall"
     return text
@@ -183,7 +180,7 @@ def _where(cells: Sequence[Comparison], names: Mapping, every: bool = True) -> s
     for budget, panels in held.items():
         groups.setdefault(tuple(p for p in order if p in panels), []).append(budget)
     ranked = sorted(groups.items(), key=lambda item: -len(item[0]))
-    return _join([_budgets_phrase(budgets, per_node) + _in_panels(panels, names, every) for panels, budgets in ranked])
+    return join_words([_budgets_phrase(budgets, per_node) + _in_panels(panels, names, every) for panels, budgets in ranked])
 
 
 
@@ -346,7 +343,7 @@ def _counts(cells: Sequence[Comparison], subject: str, side: int) -> str:
     word = "less" if side < 0 else "more"
     if len(cells) <= 3:
         shown = [f"{c.paired.a_wins if side < 0 else c.paired.b_wins} of {c.paired.instances}" for c in cells]
-        return f"{subject} costs {word} on {_join(shown)}"
+        return f"{subject} costs {word} on {join_words(shown)}"
     same = sum(1 for c in cells if (c.paired.a_wins if side < 0 else c.paired.b_wins) == c.paired.instances)
     other = sum(1 for c in cells if (c.paired.b_wins if side < 0 else c.paired.a_wins) == c.paired.instances)
     most = max(c.paired.instances for c in cells)

@@ -27,7 +27,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ..run.records import Records, as_records, canonical_key
-from .names import SETTINGS_SUFFIX, short_names
+from .names import SETTINGS_SUFFIX, join_words, short_names
 from .statistics import best_within
 
 if sys.version_info >= (3, 11):
@@ -234,10 +234,6 @@ def _plural(k: float, noun: str) -> str:
     return f"{k:g} {noun}{'' if k == 1 else 's'}"
 
 
-def _join(parts: Sequence[str]) -> str:
-    parts = list(parts)
-    return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
-
 
 def _rung_text(name: str, rung: Rung | None, budgets: Sequence[int]) -> str:
     if rung is None:
@@ -283,22 +279,22 @@ def verdict_sentence(table: Mapping, ladder: Mapping) -> str:
             else f"Some design {within} (links counted between nodes) costs at most {near:g} % more than LQR on "
                  f"{count}")
     if held and len(held) < len(systems):
-        text += f" ({_join([n for _, n in held])})"
+        text += f" ({join_words([n for _, n in held])})"
     if trivial:
         label = {table["zero"][s][1] for s, _ in trivial}
         who = label.pop() if len(label) == 1 else "the best design with no link"
         where = ("" if len(systems) == 1 else f" on each{'' if len(held) == len(systems) else ' of them'}"
-                 if len(trivial) == len(held) else f" on {_join([n for _, n in trivial])}")
+                 if len(trivial) == len(held) else f" on {join_words([n for _, n in trivial])}")
         text += (f"{', trivially' if len(trivial) == len(held) else ''}: with no link at all {who} is already within "
                  f"{near:g} % of LQR{where} ({_range([zero[s] for s, _ in trivial])})")
     missed = [(s, n) for s, n in systems if (s, n) not in held]
     costs = [f"{n} {_pct(best[s])}{' %' if best[s] < 10 else ''} ({table['first'][s][1]})" for s, n in missed
              if math.isfinite(best[s])]
     if costs:
-        text += f"; the best design {within} costs, above LQR: {_join(costs)}"
+        text += f"; the best design {within} costs, above LQR: {join_words(costs)}"
     nothing = [n for s, n in missed if not math.isfinite(best[s])]
     if nothing:
-        text += f"; {_join(nothing)} {'has' if len(nothing) == 1 else 'have'} no usable design {within}"
+        text += f"; {join_words(nothing)} {'has' if len(nothing) == 1 else 'have'} no usable design {within}"
     closed = [(zero[s] - best[s]) / (zero[s] - 1) for s, _ in systems
               if math.isfinite(zero[s]) and zero[s] > 1 and math.isfinite(best[s])]
     if closed:

@@ -1,13 +1,14 @@
 """Method labels as the answer names them: without their trailing training settings where that stays unambiguous.
 
-Shared by :mod:`compare.report.answer` and :mod:`compare.report.ladder`, which name the same methods.
+Shared by :mod:`compare.report.answer` and :mod:`compare.report.ladder`, which name the same methods; and
+the one way the report's sentences list things (:func:`join_words`).
 """
 
 from __future__ import annotations
 
 import re
 
-__all__ = ["SETTINGS_SUFFIX", "short_names"]
+__all__ = ["SETTINGS_SUFFIX", "join_words", "short_names"]
 
 #: A trailing parenthesis that names training settings, not the design: "(β path, 150 steps, 3 hops)".
 SETTINGS_SUFFIX = re.compile(r" \((β path|γ path|\d+ steps)[^()]*\)$")
@@ -22,3 +23,9 @@ def short_names(labels) -> dict[str, str]:
     for x in short.values():
         taken[x] = taken.get(x, 0) + 1
     return {x: s if s == x or (taken[s] == 1 and s not in labels) else x for x, s in short.items()}
+
+
+def join_words(parts) -> str:
+    """"a", "a and b", "a, b and c": a list as the report's sentences write it."""
+    parts = list(parts)
+    return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]

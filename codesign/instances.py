@@ -490,6 +490,20 @@ def knn_graph(positions: np.ndarray, degree: int, nearest: np.ndarray | None = N
     return adj
 
 
+def haar_orthogonal(dim: int, rng: np.random.Generator) -> np.ndarray:
+    """A Haar-random orthogonal ``dim x dim`` matrix: the draw of ``scipy.stats.ortho_group.rvs(dim, random_state=rng)``.
+
+    The same algorithm (Mezzadri 2007: Q of the QR factorization of a standard normal
+    matrix, its columns signed by R's diagonal) on the same stream, so the same matrix
+    to the last bit (``tests/test_instances.py``), without importing scipy.stats, which
+    takes about a second in every process that builds an instance
+    (``benchmarks/bench_instance_start.py``).
+    """
+    q, r = np.linalg.qr(rng.normal(size=(dim, dim)))
+    d = r.diagonal()
+    return q * (d / abs(d))[np.newaxis, :]
+
+
 def canonical_eigh(M: np.ndarray, *, rng: np.random.Generator | None = None,
                    tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues (ascending) and an orthonormal eigenbasis of symmetric ``M`` that do not depend on LAPACK.
@@ -504,7 +518,7 @@ def canonical_eigh(M: np.ndarray, *, rng: np.random.Generator | None = None,
     ``D = diag(sqrt(i + 1/2))``, which the eigenspace alone determines, each signed
     so that its largest entry (lowest index among ties) is positive. With ``rng``,
     that basis is then rotated by a Haar-random orthogonal matrix
-    (:data:`scipy.stats.ortho_group`), so that the basis of a degenerate eigenspace
+    (:func:`haar_orthogonal`), so that the basis of a degenerate eigenspace
     is uniformly distributed, as no choice of basis is privileged.
     """
     w, V = np.linalg.eigh(M)
@@ -522,9 +536,7 @@ def canonical_eigh(M: np.ndarray, *, rng: np.random.Generator | None = None,
             lead = np.argmax(magnitude >= magnitude.max(axis=0) - 1e-9, axis=0)
             block = block * np.sign(block[lead, np.arange(block.shape[1])])
             if rng is not None:
-                import scipy.stats
-
-                block = block @ scipy.stats.ortho_group.rvs(stop - start, random_state=rng)
+                block = block @ haar_orthogonal(stop - start, rng)
             V[:, start:stop] = block
             w[start:stop] = w[start:stop].mean()
         start = stop

@@ -31,8 +31,9 @@ PRESET_TIMES = {
     "scale": "~17-19 min (1023-1154 s measured, 1028 s and 1066 s on 2026-11-27)",
     "small": "~7-11 min (420-670 s measured, 536 s and 555 s on 2026-11-27)",
     "benchmark-systems": "~6-7 min (349-416 s measured, 377-378 s on 2026-11-27)",
-    "scale-large": "~63 min (3806 s measured)",
+    "scale-large": "~60 min (3486 s on 2026-11-28, with short tests beside it part of the time; 3806 s before)",
     "power": "~4 min (234 s measured on 2026-11-28)",
+    "learned-class": "~35 min (2234 runs; measured once, on 2026-11-28)",
 }
 
 

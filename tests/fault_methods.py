@@ -7,6 +7,7 @@ import ctypes
 import os
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -48,7 +49,10 @@ def sys_exit(instance, *, seed: int = 0):
 
 @method("fault_hang", label="Hang")
 def hang(instance, *, seed: int = 0):
-    """Never returns."""
+    """Never returns; with FAULT_HANG_STARTED set, first leaves a file named after its process there."""
+    started = os.environ.get("FAULT_HANG_STARTED")
+    if started:  # so a test can wait for the run itself rather than a guessed time
+        (Path(started) / str(os.getpid())).touch()
     time.sleep(3600)
     return _lqr(instance)
 

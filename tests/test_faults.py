@@ -263,22 +263,20 @@ def _start_hanging_run(tmp_path) -> tuple[subprocess.Popen, set[int]]:
     spec.write_text(spec.read_text().replace("seeds = 1", "seeds = 2"))
     # As from a terminal's foreground: Ctrl-C not ignored. (A shell starts background jobs with SIGINT
     # ignored, and a process keeps an ignored SIGINT ignored: run from one, the run could not be interrupted.)
+    started = tmp_path / "started"
+    started.mkdir()
     proc = subprocess.Popen([sys.executable, "-m", "compare.cli", "run", str(spec), "--out", str(tmp_path / "o"),
                              "--workers", "2", "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True,
+                            text=True, start_new_session=True, env={**os.environ, "FAULT_HANG_STARTED": str(started)},
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
-    workers: set[int] = set()
-    while time.monotonic() < deadline:
+    while time.monotonic() < deadline and len(list(started.iterdir())) < 2:  # both workers inside their runs
         if proc.poll() is not None:
             pytest.fail(f"the run ended early ({proc.returncode}): {proc.communicate()[1]}")
-        workers = _descendants(proc.pid)
-        if len(workers) >= 3:  # two workers and the resource tracker
-            break
-        time.sleep(0.5)
-    time.sleep(8)  # the workers import the methods and start their (hanging) runs
+        time.sleep(0.2)
+    in_runs = {int(p.name) for p in started.iterdir()}
     workers = _descendants(proc.pid)
-    assert len(workers) >= 2, workers
+    assert len(in_runs) == 2 and in_runs <= workers, (in_runs, workers)
     return proc, workers
 
 

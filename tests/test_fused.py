@@ -12,7 +12,7 @@ import torch
 
 from codesign import Instance, grnn, paper_instance
 from codesign.learned import fused
-from codesign.learned.engines import resolve_engine
+from codesign.learned.engines import fused_unsupported, resolve_engine
 from codesign.learned.trainer import selection_set
 from codesign.learned.grnn_bptt import ModelSpec, _Problem, grnn_loss_and_grad, init_fwg
 from compare.run.families.mass_spring import mass_spring_instance
@@ -107,17 +107,21 @@ def test_float32_fused_gradients_are_float32_and_close(inst):
 
 
 def test_engine_resolution_and_bad_engines():
-    assert resolve_engine("auto", 1, 1) == "fused"
-    assert resolve_engine("auto", 2, 1) == "torch"
-    assert resolve_engine("torch", 3, 2) == "torch"
-    assert resolve_engine("auto", 1, 1, nodes=100, support_density=1.0) == "torch"  # slower there
-    assert resolve_engine("auto", 1, 1, nodes=100, support_density=0.1) == "fused"
-    assert resolve_engine("auto", 1, 1, nodes=20, support_density=1.0) == "fused"
-    assert resolve_engine("fused", 1, 1, nodes=100, support_density=1.0) == "fused"
-    with pytest.raises(ValueError, match="one state and one input per node"):
-        resolve_engine("fused", 2, 1)
+    two_states = fused_unsupported(states_per_node=2, inputs_per_node=1)
+    assert fused_unsupported() is None
+    assert resolve_engine("auto") == "fused"
+    assert resolve_engine("auto", unsupported=two_states) == "torch"
+    assert resolve_engine("torch", unsupported=fused_unsupported(states_per_node=3, inputs_per_node=2)) == "torch"
+    assert resolve_engine("auto", nodes=100, support_density=1.0) == "torch"  # slower there
+    assert resolve_engine("auto", nodes=100, support_density=0.1) == "fused"
+    assert resolve_engine("auto", nodes=20, support_density=1.0) == "fused"
+    assert resolve_engine("fused", nodes=100, support_density=1.0) == "fused"
+    with pytest.raises(ValueError, match="engine 'fused' needs one state and one input per node, this model has 2 and 1"):
+        resolve_engine("fused", unsupported=two_states)
+    with pytest.raises(ValueError, match=r"engine 'fused' needs Q = R = I"):
+        resolve_engine("fused", unsupported=fused_unsupported(unit_weights=False))
     with pytest.raises(ValueError, match="engine must be one of"):
-        resolve_engine("numba", 1, 1)
+        resolve_engine("numba")
 
 
 def test_grnn_method_engines_agree_and_reject_what_they_cannot_run(inst):

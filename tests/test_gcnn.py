@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from baselines import GCNNController, gcnn, gcnn_batch
-from codesign import controller_from_arrays, paper_instance, simulate
+from codesign import Instance, controller_from_arrays, paper_instance, simulate
 from compare.run.registry import get_method
 from references import gcnn_cost_autograd  # tests/references.py
 
@@ -139,3 +139,8 @@ def test_auto_takes_the_fused_gcnn_only_where_it_is_faster():
     assert parse_job(paper_instance(0, n=40, degree=6), {}).engine == "torch"  # dense loops do not unroll
     assert parse_job(paper_instance(0, n=40, degree=6), {"engine": "fused"}).engine == "fused"
     assert parse_job(mass_spring_instance(3), {}).engine == "torch"  # node blocks
+    paper = paper_instance(0, n=20)
+    weighted = Instance.from_matrices(paper.A, paper.B, Q=2.0 * paper.Q, comm_adj=paper.comm_adj)
+    assert parse_job(weighted, {}).engine == "torch"  # the fused kernel assumes Q = R = I
+    with pytest.raises(ValueError, match=r"engine 'fused' needs Q = R = I; use engine 'torch' or 'auto'"):
+        parse_job(weighted, {"engine": "fused"})

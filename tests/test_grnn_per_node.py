@@ -8,7 +8,7 @@ import torch
 
 from codesign import Instance, compare_exact_and_simulated, controller_from_arrays, get_method, grnn, paper_instance
 from codesign.evaluation import impulse_responses
-from codesign.learned.engines import resolve_engine
+from codesign.learned.engines import fused_unsupported, resolve_engine
 from codesign.learned.grnn import GRNNController, LinearGRNNController, _padded_problem
 from codesign.learned.grnn_bptt import (GRNNStack, ModelSpec, _Problem, grnn_loss_and_grad,
                                         init_fwg, train_grnn)
@@ -171,10 +171,11 @@ def test_a_per_node_readout_does_not_transfer_to_another_size(inst):
 
 def test_engine_rule_for_per_node(inst):
     """auto takes torch; an explicit fused is a one-line error naming the setting and the engine."""
-    assert resolve_engine("auto", readout="per_node") == "torch"
-    assert resolve_engine("auto") == "fused"
+    per_node = fused_unsupported(readout="per_node")
+    assert resolve_engine("auto", unsupported=per_node) == "torch"
+    assert resolve_engine("auto", unsupported=fused_unsupported()) == "fused"
     with pytest.raises(ValueError, match="engine 'fused' supports readout 'shared' only, got readout 'per_node'"):
-        resolve_engine("fused", readout="per_node")
+        resolve_engine("fused", unsupported=per_node)
     with pytest.raises(ValueError, match="engine 'fused' supports readout 'shared' only"):
         grnn(inst, readout="per_node", engine="fused", steps=1)
     with pytest.raises(ValueError, match="readout"):

@@ -221,3 +221,17 @@ def test_large_instances_use_the_doubling_dare_and_it_agrees_with_scipy(monkeypa
     assert np.linalg.norm(fast.P - reference.P) <= 1e-12 * np.linalg.norm(reference.P)
     with pytest.raises(InstanceError, match="not stabilizable"):
         Instance.from_matrices(np.diag(np.r_[1.5 * np.ones(11), 0.5]), np.diag(np.r_[np.zeros(11), 1.0]))
+
+
+def test_haar_orthogonal_is_scipys_ortho_group_draw_to_the_last_bit():
+    """The instances' basis rotation without scipy.stats: the same draw on the same stream."""
+    scipy_stats = pytest.importorskip("scipy.stats")
+    from codesign.instances import haar_orthogonal
+
+    for dim in (1, 2, 3, 5, 11, 40):
+        for seed in range(5):
+            ours = haar_orthogonal(dim, np.random.default_rng([seed, dim]))
+            theirs = scipy_stats.ortho_group.rvs(dim, random_state=np.random.default_rng([seed, dim]))
+            assert ours.shape == (dim, dim)
+            np.testing.assert_array_equal(ours, theirs)
+            np.testing.assert_allclose(ours @ ours.T, np.eye(dim), atol=1e-13)

@@ -45,7 +45,7 @@ from ..evaluation import STRUCTURED_ABOVE, spectral_radius, structured_operator
 from ..instances import node_ranks, node_width
 from ..methods import Above, AtLeast, AtMost, method
 from ..status import DIVERGED
-from .engines import ENGINES, FUSED_DENSE_NODES
+from .engines import ENGINES, fused_unsupported, resolve_engine
 from .gcnn_bptt import GCNN_FEATURES, GCNN_TAPS, GCNNProblem, GCNNStack, node_layout, gcnn_init, tap_map
 from .settings import SEED, TrainingSettings, takes_settings
 from .trainer import (Loop, Member, TrainingJob, best_member, curve, diverged_members_message,
@@ -244,7 +244,8 @@ class GCNNSettings(TrainingSettings):
         compiled pass per model (numba, :mod:`codesign.learned.gcnn_fused`), about twice as
         fast, on the paper's setting only (one state and one input per node, Q = R = I).
         The default "auto" takes "fused" there up to 32 nodes (beyond, its dense
-        products are slower than torch's) and "torch" elsewhere; the engines agree to
+        products are slower than torch's) and "torch" elsewhere, by the GRNN's rule
+        (:func:`codesign.learned.engines.resolve_engine`); the engines agree to
         rounding at every step.
     """
 
@@ -275,15 +276,13 @@ def parse_job(instance, kwargs: dict) -> _Job:
     seed = kwargs.pop("seed", 0)
     SEED.check(seed, "seed")
     settings = GCNNSettings.parse(kwargs, "GCNN")
-    paper_setting = node_layout(instance) is None
-    if settings.engine == "fused" and not paper_setting:
-        raise ValueError("engine 'fused' needs one state and one input per node and Q = R = I; "
-                         "use engine 'torch' or 'auto'")
-    # Its products with S, A and B are dense loops that unroll only for small N: at N = 50 and 100
-    # the fused pass trained 2.3x and 4.6x slower than torch's (the scale preset), so "auto" stops there.
-    small = instance.nodes <= FUSED_DENSE_NODES
-    engine = "fused" if settings.engine == "fused" or (settings.engine == "auto" and paper_setting and small) \
-        else "torch"
+    # Its kernel multiplies by S, A and B dense, in loops that unroll only for small N: at N = 50 and
+    # 100 the fused pass trained 2.3x and 4.6x slower than torch's (the scale preset), at N = 20 2.1x
+    # faster (benchmarks/bench_gcnn.py); hence support_density 1.
+    unsupported = fused_unsupported(
+        states_per_node=node_width(instance.state_nodes), inputs_per_node=node_width(instance.input_nodes),
+        unit_weights=node_layout(instance) is None)
+    engine = resolve_engine(settings.engine, unsupported=unsupported, nodes=instance.nodes, support_density=1.0)
     return _Job(instance, int(seed), {"seed": int(seed), **dict(sorted(settings.changed().items()))}, settings,
                 engine)
 

@@ -31,7 +31,7 @@ from ..evaluation import STRUCTURED_ABOVE, exact_cost, spectral_radius
 from ..instances import hop_distances
 from ..methods import Above, AtLeast, method
 from ..status import DIVERGED, OPTIMAL
-from .engines import ENGINES, resolve_engine
+from .engines import ENGINES, fused_unsupported, resolve_engine
 from .grnn_bptt import ACTIVATIONS, READOUTS, GRNNStack, ModelSpec, init_fwg
 from .settings import SEED, TrainingSettings, takes_settings
 from .trainer import (Loop, TrainingJob, best_member, curve, diverged_members_message, finish_designs,
@@ -175,9 +175,9 @@ def _parse(instance, kwargs: dict) -> _Job:
     SEED.check(seed, "seed")
     settings = GRNNSettings.parse(kwargs, "GRNN")
     check_warm_settings(settings, variant, instance)
-    resolve_engine(settings.engine, slot_index(instance.state_nodes, instance.nodes)[1],
-                   slot_index(instance.input_nodes, instance.nodes)[1],
-                   readout=settings.readout)  # fails now, not after training
+    resolve_engine(settings.engine, unsupported=fused_unsupported(  # fails now, not after training
+        states_per_node=slot_index(instance.state_nodes, instance.nodes)[1],
+        inputs_per_node=slot_index(instance.input_nodes, instance.nodes)[1], readout=settings.readout))
     params = {"variant": variant, "seed": int(seed), **dict(sorted(settings.changed().items()))}
     if beta is not None:
         params["beta"] = float(beta)

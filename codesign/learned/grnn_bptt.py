@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._lazy import lazy_import
-from .engines import ENGINES, resolve_engine, s_supports
+from .engines import ENGINES, fused_unsupported, resolve_engine, s_supports
 from .trainer import Loop, Member, StackModel, no_grad, tanh_, torch_dtype, train_stack
 
 torch = lazy_import("torch")
@@ -498,8 +498,10 @@ class GRNNStack(StackModel):
         N = specs[0].S0.shape[0]
         masks = np.stack([np.asarray(s.mask, dtype=bool) for s in specs])
         supports = s_supports(np.stack([s.S0 for s in specs]), masks)
-        return resolve_engine(engine, specs[0].A.shape[1] // N, specs[0].B.shape[1] // N, nodes=N,
-                              support_density=supports.mean(axis=(1, 2)).max(), readout=readout)
+        unsupported = fused_unsupported(states_per_node=specs[0].A.shape[1] // N,
+                                        inputs_per_node=specs[0].B.shape[1] // N, readout=readout)
+        return resolve_engine(engine, unsupported=unsupported, nodes=N,
+                              support_density=supports.mean(axis=(1, 2)).max())
 
     @classmethod
     def independent(cls, members, loop: Loop, *, activation: str = "tanh", engine: str = "torch",

@@ -215,8 +215,6 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
     -------
     fig, axes
     """
-    from matplotlib.transforms import offset_copy
-
     from .statistics import budget_fronts
 
     panels = sorted({p.panel for p in points})
@@ -232,59 +230,97 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
     for panel in panels:
         ax = axes[panel]
         usable = [p for p in points if p.panel == panel and p.ok > 0]
-        if not usable:
-            continue
-        mine = {f.label: f for f in fronts if f.panel == panel}
-        scale = panel[1] if per_node and panel[1] else 1.0  # links per node; 0: a family without n
-        bottom, top = limits or y_limits(axis_costs(usable, mine.values()))
-        right = max(p.links[2] for p in usable) / scale
-        for label, rs in (designs[panel].by_label.items() if panel in designs else ()):
-            ok = [r for r in rs if r.ok]
-            if ok:
-                s = styles[label]
-                ax.scatter([r.links / scale for r in ok], excess([r.cost for r in ok], bottom), s=7, color=s.colour,
-                           marker=s.marker, alpha=0.18, linewidths=0, zorder=1)
-        for label, f in sorted(mine.items()):
-            draw_front_line(ax, f, styles[label], bottom, right * scale, scale)
-        series = {label: sorted((p.x / scale, p.cost[1]) for p in usable if p.label == label and p.reached)
-                  for label in labels}
-        offsets = _dodge({k: v for k, v in series.items() if v})
-        off_scale = []
-        for label in labels:
-            if not series[label]:
-                continue
-            s = styles[label]
-            x = np.array([v[0] for v in series[label]])
-            y = np.array([v[1] for v in series[label]])
-            transform = ax.transData
-            if label in offsets:
-                transform = offset_copy(ax.transData, fig=fig, x=offsets[label], units="points")
-            inside = y <= OFF_SCALE
-            off_scale += [(xi, yi, s.colour) for xi, yi in zip(x[~inside], y[~inside])]
-            if not inside.any():
-                continue  # an empty line drawn unclipped would sit at the figure's origin and spoil the layout
-            ax.plot(x[inside], excess(y[inside], bottom), color=s.colour, marker=s.marker, linestyle="none",
-                    markersize=(6.5 if len(x) == 1 else 5.5) * (1.5 if s.marker == "*" else 1),
-                    markerfacecolor=s.face, markeredgecolor=s.edge,
-                    markeredgewidth=s.edge_width, transform=transform,
-                    # Single-setting methods over the paths whose ends they share (decentralized = γ = ∞).
-                    zorder=6 if label.startswith("LQR") else 5 if len(x) == 1 else 4, clip_on=False,
-                    gid=method_gid(label))
-        excess_axis(ax, bottom, top * 1.3)
-        links_axis(ax, right, per_node=per_node)
-        # On the axis's own top edge: where every shown cost is within 0.8 % of LQR's, top * 1.3 lies
-        # below it (or at or below 0, far off a log axis, which blew a figure up to 390,000 px).
-        if off_scale:
-            _mark_off_scale(ax, off_scale, ax.get_ylim()[1])
-        ax.set_xlabel("directed off-diagonal links per node" if per_node else "directed off-diagonal links")
-        ax.set_ylabel("excess cost over LQR")
-        ax.set_title(panel_heading(panel, (instances or {}).get(panel)), fontsize=10)
-        if boundaries and panel in boundaries and any(p.info_model == "delayed" for p in usable):
-            draw_boundary(ax, boundaries[panel] / scale)
-        ax.grid(True, which="major", alpha=0.3)
+        if usable:
+            _draw_panel(fig, ax, panel, usable, fronts, designs.get(panel), styles=styles, labels=labels,
+                        limits=limits, per_node=per_node, boundaries=boundaries, instances=instances)
     if own:
         finish_legend(fig, legend_handles(styles, labels) + boundary_handles(axes.values()),
                       title="line: median over instances of the best\ncost within L links (budget front)\n"
                             "marker: one setting's medians, where on\nor above its method's front\n"
                             "faint: every instance's design")
     return fig, axes
+
+
+def _draw_panel(fig, ax, panel: tuple, usable: list[Point], fronts, designs, *, styles: dict, labels: list[str],
+                limits, per_node: bool, boundaries: dict | None, instances: dict | None) -> None:
+    """One panel: its designs, each method's front through them, the settings' medians, its axes, the QI boundary.
+
+    ``usable`` are the panel's points with a usable design, ``designs`` its records (None
+    without records), ``limits`` the (bottom, top) every panel shares, if they share one.
+    """
+    mine = {f.label: f for f in fronts if f.panel == panel}
+    scale = panel[1] if per_node and panel[1] else 1.0  # links per node; 0: a family without n
+    bottom, top = limits or y_limits(axis_costs(usable, mine.values()))
+    right = max(p.links[2] for p in usable) / scale
+    if designs is not None:
+        _draw_designs(ax, designs, styles, scale, bottom)
+    for label, f in sorted(mine.items()):
+        draw_front_line(ax, f, styles[label], bottom, right * scale, scale)
+    off_scale = _draw_settings(fig, ax, usable, labels, styles, scale, bottom)
+    _finish_axes(ax, bottom, top, right, per_node, off_scale)
+    ax.set_title(panel_heading(panel, (instances or {}).get(panel)), fontsize=10)
+    if boundaries and panel in boundaries and any(p.info_model == "delayed" for p in usable):
+        draw_boundary(ax, boundaries[panel] / scale)
+    ax.grid(True, which="major", alpha=0.3)
+
+
+def _draw_designs(ax, designs, styles: dict, scale: float, bottom: float) -> None:
+    """Every usable design of a panel as a faint dot in its method's colour and marker."""
+    for label, rs in designs.by_label.items():
+        ok = [r for r in rs if r.ok]
+        if ok:
+            s = styles[label]
+            ax.scatter([r.links / scale for r in ok], excess([r.cost for r in ok], bottom), s=7, color=s.colour,
+                       marker=s.marker, alpha=0.18, linewidths=0, zorder=1)
+
+
+def _draw_settings(fig, ax, usable: list[Point], labels: list[str], styles: dict, scale: float,
+                   bottom: float) -> list[tuple]:
+    """Each method's reached settings' medians as unconnected markers; returns the (x, cost, colour) above the axis.
+
+    Single-setting methods that share a link count are moved apart (:func:`_dodge`).
+    """
+    from matplotlib.transforms import offset_copy
+
+    series = {label: sorted((p.x / scale, p.cost[1]) for p in usable if p.label == label and p.reached)
+              for label in labels}
+    offsets = _dodge({k: v for k, v in series.items() if v})
+    off_scale = []
+    for label in labels:
+        if not series[label]:
+            continue
+        transform = ax.transData
+        if label in offsets:
+            transform = offset_copy(ax.transData, fig=fig, x=offsets[label], units="points")
+        off_scale += _draw_setting_markers(ax, label, series[label], styles[label], bottom, transform)
+    return off_scale
+
+
+def _draw_setting_markers(ax, label: str, series: list[tuple], s: Style, bottom: float, transform) -> list[tuple]:
+    """One method's (x, median cost) markers up to OFF_SCALE; returns the (x, cost, colour) above it."""
+    x = np.array([v[0] for v in series])
+    y = np.array([v[1] for v in series])
+    inside = y <= OFF_SCALE
+    off_scale = [(xi, yi, s.colour) for xi, yi in zip(x[~inside], y[~inside])]
+    if not inside.any():
+        return off_scale  # an empty line drawn unclipped would sit at the figure's origin and spoil the layout
+    ax.plot(x[inside], excess(y[inside], bottom), color=s.colour, marker=s.marker, linestyle="none",
+            markersize=(6.5 if len(x) == 1 else 5.5) * (1.5 if s.marker == "*" else 1),
+            markerfacecolor=s.face, markeredgecolor=s.edge,
+            markeredgewidth=s.edge_width, transform=transform,
+            # Single-setting methods over the paths whose ends they share (decentralized = γ = ∞).
+            zorder=6 if label.startswith("LQR") else 5 if len(x) == 1 else 4, clip_on=False,
+            gid=method_gid(label))
+    return off_scale
+
+
+def _finish_axes(ax, bottom: float, top: float, right: float, per_node: bool, off_scale: list[tuple]) -> None:
+    """A panel's cost and links axes and their labels, what lies above the cost axis marked on its top edge."""
+    excess_axis(ax, bottom, top * 1.3)
+    links_axis(ax, right, per_node=per_node)
+    # On the axis's own top edge: where every shown cost is within 0.8 % of LQR's, top * 1.3 lies
+    # below it (or at or below 0, far off a log axis, which blew a figure up to 390,000 px).
+    if off_scale:
+        _mark_off_scale(ax, off_scale, ax.get_ylim()[1])
+    ax.set_xlabel("directed off-diagonal links per node" if per_node else "directed off-diagonal links")
+    ax.set_ylabel("excess cost over LQR")

@@ -264,63 +264,96 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
     fig, axes, own = panel_figure(panels, axes)
     per_node = len({p[1] for p in panels}) > 1
 
-    def shown_costs(group):
-        finite = np.concatenate([f.cost[1][np.isfinite(f.cost[1])] for f in group] + [np.array([])])
-        extra = [bounds[p][0] for p in {f.panel for f in group} if bounds and p in bounds]
-        finite = np.append(finite, extra)
-        return finite[finite <= OFF_SCALE]
-
-    limits = y_limits(shown_costs(fronts)) if shared_y(panels) else None
-    above, partial, missing = {}, {}, {}
+    limits = y_limits(_shown_costs(fronts, bounds)) if shared_y(panels) else None
     for panel in panels:
-        ax = axes[panel]
-        mine = [f for f in fronts if f.panel == panel]
-        scale = panel[1] if per_node and panel[1] else 1.0  # links per node; 0: a family without n
-        right = max(float(f.budgets[-1]) for f in mine) / scale
-        if not any(np.isfinite(f.cost[1]).any() for f in mine):
-            continue
-        bottom, top = limits or y_limits(shown_costs(mine))
-        for f in mine:
-            s = _style(styles, f.label)
-            # Not started (inf) leaves a gap, not a line off the axis.
-            x, _ = draw_front_line(ax, f, s, bottom, right * scale, scale)
-            # A quartile at inf (a quarter of the instances without a design) runs the band to the top edge.
-            q1, q3 = (np.append(row, row[-1]) for row in (f.cost[0], f.cost[2]))
-            q1 = np.where(np.isfinite(q1), excess(q1, bottom), np.nan)
-            q3 = np.where(np.isfinite(q3), excess(q3, bottom), 1e12)
-            ax.fill_between(x, q1, q3, where=np.isfinite(q1), step="post", color=s.colour, alpha=0.08, linewidth=0)
-            if f.start is not None and np.nanmin(f.cost[1]) > OFF_SCALE:
-                above.setdefault(panel, []).append(f"{f.label} ({np.nanmin(f.cost[1]):.3g})")
-            elif f.start is not None:
-                k = int(np.searchsorted(f.budgets, f.start))
-                ax.plot(f.budgets[k] / scale, excess(f.cost[1][k], bottom), marker=s.marker, color=s.colour,
-                        linestyle="none", markersize=9 if s.marker == "*" else 6, markerfacecolor=s.face,
-                        markeredgecolor=s.edge, markeredgewidth=s.edge_width,
-                        zorder=4 if f.label.startswith("LQR") or f.budgets.size == 1 else 3,
-                        clip_on=bool(f.cost[1][k] - 1.0 > top * 1.25), gid=method_gid(f.label))
-            if f.covered == 0:
-                missing.setdefault(panel, []).append(f.label)
-            elif f.covered < f.instances:
-                partial.setdefault(panel, []).append(f"{f.label} ({f.covered} of {f.instances})")
-        excess_axis(ax, bottom, top * 1.25)
-        links_axis(ax, right, per_node=per_node)
-        ax.set_xlabel("link budget L per node" if per_node else "link budget L (directed off-diagonal links)")
-        ax.set_ylabel("best excess cost over LQR")
-        notes = [textwrap.fill(f"{head}: " + ", ".join(items[panel]), 60)
-                 for head, items in (("above the axis", above), ("designs on some instances only", partial),
-                                     ("no usable design", missing))
-                 if panel in items]
-        ax.set_title("\n".join([panel_heading(panel, max(f.instances for f in mine))] + notes),
-                     fontsize=9 if notes else 10)
-        if bounds and panel in bounds:
-            value, text = bounds[panel]
-            ax.axhline(excess(value, bottom), color=BOUND_COLOUR, linewidth=1.0, linestyle=(0, (4, 2, 1, 2)), zorder=1)
-            ax.text(0.01, excess(value, bottom), f" {text}", transform=ax.get_yaxis_transform(), ha="left", va="top",
-                    fontsize=7)
-        if boundaries and panel in boundaries and any(f.info_model == "delayed" for f in mine):
-            draw_boundary(ax, boundaries[panel] / scale)
-        ax.grid(True, which="major", alpha=0.3)
+        _draw_panel(axes[panel], panel, [f for f in fronts if f.panel == panel], styles, limits=limits,
+                    per_node=per_node, boundaries=boundaries, bounds=bounds)
     if own:
         finish_legend(fig, legend_handles(styles, labels) + boundary_handles(axes.values()),
                       title="median over instances; band 25–75 %")
     return fig, axes
+
+
+def _draw_panel(ax, panel: tuple, fronts, styles: dict, *, limits, per_node: bool, boundaries: dict | None,
+                bounds: dict | None) -> None:
+    """One panel: each front with its band and start, its axes, a title that names what is not drawn, the bound
+    and the QI boundary. A panel none of whose fronts has a finite median stays empty.
+
+    ``limits`` is the (bottom, top) every panel shares, if they share one.
+    """
+    scale = panel[1] if per_node and panel[1] else 1.0  # links per node; 0: a family without n
+    right = max(float(f.budgets[-1]) for f in fronts) / scale
+    if not any(np.isfinite(f.cost[1]).any() for f in fronts):
+        return
+    bottom, top = limits or y_limits(_shown_costs(fronts, bounds))
+    above = [_draw_front(ax, f, _style(styles, f.label), bottom, top, right, scale) for f in fronts]
+    _finish_front_axes(ax, bottom, top, right, per_node)
+    notes = _title_notes(fronts, [note for note in above if note is not None])
+    ax.set_title("\n".join([panel_heading(panel, max(f.instances for f in fronts))] + notes),
+                 fontsize=9 if notes else 10)
+    if bounds and panel in bounds:
+        _draw_bound(ax, bounds[panel], bottom)
+    if boundaries and panel in boundaries and any(f.info_model == "delayed" for f in fronts):
+        draw_boundary(ax, boundaries[panel] / scale)
+    ax.grid(True, which="major", alpha=0.3)
+
+
+def _shown_costs(fronts, bounds: dict | None) -> np.ndarray:
+    """The costs a budget-front axis must show: the fronts' finite medians and the panels' bounds, up to OFF_SCALE."""
+    finite = np.concatenate([f.cost[1][np.isfinite(f.cost[1])] for f in fronts] + [np.array([])])
+    extra = [bounds[p][0] for p in {f.panel for f in fronts} if bounds and p in bounds]
+    finite = np.append(finite, extra)
+    return finite[finite <= OFF_SCALE]
+
+
+def _draw_front(ax, front, s: Style, bottom: float, top: float, right: float, scale: float) -> str | None:
+    """A front's median step line, its 25–75 % band and its marker where it starts.
+
+    Returns the note that names the front above the axis where its lowest median is
+    above OFF_SCALE (then it has no marker), else None.
+    """
+    # Not started (inf) leaves a gap, not a line off the axis.
+    x, _ = draw_front_line(ax, front, s, bottom, right * scale, scale)
+    # A quartile at inf (a quarter of the instances without a design) runs the band to the top edge.
+    q1, q3 = (np.append(row, row[-1]) for row in (front.cost[0], front.cost[2]))
+    q1 = np.where(np.isfinite(q1), excess(q1, bottom), np.nan)
+    q3 = np.where(np.isfinite(q3), excess(q3, bottom), 1e12)
+    ax.fill_between(x, q1, q3, where=np.isfinite(q1), step="post", color=s.colour, alpha=0.08, linewidth=0)
+    if front.start is None:
+        return None
+    if np.nanmin(front.cost[1]) > OFF_SCALE:
+        return f"{front.label} ({np.nanmin(front.cost[1]):.3g})"
+    k = int(np.searchsorted(front.budgets, front.start))
+    ax.plot(front.budgets[k] / scale, excess(front.cost[1][k], bottom), marker=s.marker, color=s.colour,
+            linestyle="none", markersize=9 if s.marker == "*" else 6, markerfacecolor=s.face,
+            markeredgecolor=s.edge, markeredgewidth=s.edge_width,
+            zorder=4 if front.label.startswith("LQR") or front.budgets.size == 1 else 3,
+            clip_on=bool(front.cost[1][k] - 1.0 > top * 1.25), gid=method_gid(front.label))
+    return None
+
+
+def _title_notes(fronts, above: list[str]) -> list[str]:
+    """The notes under a panel's title: the fronts above the axis (``above``, from :func:`_draw_front`), and
+    the methods with designs on some instances only or on none."""
+    partial = [f"{f.label} ({f.covered} of {f.instances})" for f in fronts if 0 < f.covered < f.instances]
+    missing = [f.label for f in fronts if f.covered == 0]
+    return [textwrap.fill(f"{head}: " + ", ".join(items), 60)
+            for head, items in (("above the axis", above), ("designs on some instances only", partial),
+                                ("no usable design", missing))
+            if items]
+
+
+def _finish_front_axes(ax, bottom: float, top: float, right: float, per_node: bool) -> None:
+    """A budget-front panel's cost and links axes and their labels."""
+    excess_axis(ax, bottom, top * 1.25)
+    links_axis(ax, right, per_node=per_node)
+    ax.set_xlabel("link budget L per node" if per_node else "link budget L (directed off-diagonal links)")
+    ax.set_ylabel("best excess cost over LQR")
+
+
+def _draw_bound(ax, bound: tuple[float, str], bottom: float) -> None:
+    """A lower bound (cost, text) as a dash-dotted horizontal line, named at the axis' left edge."""
+    value, text = bound
+    ax.axhline(excess(value, bottom), color=BOUND_COLOUR, linewidth=1.0, linestyle=(0, (4, 2, 1, 2)), zorder=1)
+    ax.text(0.01, excess(value, bottom), f" {text}", transform=ax.get_yaxis_transform(), ha="left", va="top",
+            fontsize=7)

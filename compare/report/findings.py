@@ -78,6 +78,8 @@ ALPHA = 0.05
 PRACTICAL_MARGIN = 1e-3
 #: In a plan, "each panel's own budgets" (:func:`compare.report.statistics.panel_budgets`, or the caller's).
 _PANEL_BUDGETS = "budgets"
+#: The group of the claims the findings are about: designs that see the same, delayed, information.
+_SAME_DELAYED = "same information model: delayed"
 
 # Learned designs with the delayed information model, in the order the findings list them.
 _LEARNED = ("grnn_sparse", "grnn", "grnn_dense", "grnn_fixed")
@@ -340,44 +342,75 @@ def _plan(arms: Mapping[str, _Arm], pairs: Iterable) -> list[tuple[str, str, obj
 
     ``budgets`` is ``(None,)`` (any number of links) or :data:`_PANEL_BUDGETS`.
     """
-    budgets = _PANEL_BUDGETS
-    def by_method(*methods, linear=None):
-        return [a.label for a in arms.values()
-                if a.method in methods and (linear is None or a.linear == linear) and a.label != BOUND_LABEL]
-
-    learned = sorted(by_method(*_LEARNED), key=lambda x: (_LEARNED.index(arms[x].method), arms[x].linear, arms[x].kinds, x))
-    static_delayed = by_method("sparse_delayed")
-    same = "same information model: delayed"
-    plan = [(a, b, budgets, same) for a in learned for b in static_delayed]
-    plan += [(a, b, budgets, same) for a in by_method("grnn_sparse", linear=True)
-             for b in by_method("grnn_sparse", linear=False) if arms[a].kinds == arms[b].kinds]
-    # Why a GRNN-Sparse design loses (compare.report.decomposition): the model class (per-node against the
-    # shared readout, both from random) and the training (a warm start against the random draw).
-    sparse = [arms[x] for x in by_method("grnn_sparse")]
-    plan += [(a.label, b.label, budgets, same) for a in sparse for b in sparse
-             if a.linear == b.linear and a.kinds == ("per_node",) and b.kinds == ()]
-    plan += [(a.label, b.label, budgets, same) for a in sparse for b in sparse
-             if a.linear == b.linear and len(a.kinds) == 2 and a.kinds[0] == "per_node" and b.kinds == ("per_node",)]
+    learned = sorted(_labels_of(arms, *_LEARNED),
+                     key=lambda x: (_LEARNED.index(arms[x].method), arms[x].linear, arms[x].kinds, x))
+    static_delayed = _labels_of(arms, "sparse_delayed")
+    plan = _delayed_plan(arms, learned, static_delayed)
+    plan += _decomposition_plan(arms)
     if BOUND_LABEL in arms:
-        plant_sls = [a.label for a in arms.values() if a.method in _SLS and a.graph == "plant"
-                     and a.label != BOUND_LABEL]
-        plan += [(a, BOUND_LABEL, (None,), "same information model: delayed, against the SLS bound")
-                 for a in learned + static_delayed + plant_sls]
-    instantaneous = by_method("sparse_admm") or by_method("sparse_sdp")
-    tanh_sparse = by_method("grnn_sparse", linear=False)
-    # Cross-model context for the paper's GRNN-Sparse only, where other kinds of it stand beside it.
+        plan += _bound_plan(arms, learned + static_delayed)
+    plan += _cross_plan(arms)
+    plan += _asked_plan(arms, pairs, {(a, b) for a, b, _, _ in plan})
+    return plan
+
+
+def _labels_of(arms: Mapping[str, _Arm], *methods: str, linear: bool | None = None) -> list[str]:
+    """The arms of ``methods`` (tanh or linear alone where ``linear`` says), the SLS bound left out."""
+    return [a.label for a in arms.values()
+            if a.method in methods and (linear is None or a.linear == linear) and a.label != BOUND_LABEL]
+
+
+def _delayed_plan(arms: Mapping[str, _Arm], learned: list[str], static_delayed: list[str]) -> list[tuple]:
+    """Each learned design against the delayed ℓ1 gain, and linear against tanh GRNN-Sparse of the same kind."""
+    plan = [(a, b, _PANEL_BUDGETS, _SAME_DELAYED) for a in learned for b in static_delayed]
+    plan += [(a, b, _PANEL_BUDGETS, _SAME_DELAYED) for a in _labels_of(arms, "grnn_sparse", linear=True)
+             for b in _labels_of(arms, "grnn_sparse", linear=False) if arms[a].kinds == arms[b].kinds]
+    return plan
+
+
+def _decomposition_plan(arms: Mapping[str, _Arm]) -> list[tuple]:
+    """GRNN-Sparse kinds against each other, for why a GRNN-Sparse design loses (compare.report.decomposition).
+
+    The model class (per-node against the shared readout, both from random) and the
+    training (a warm start against the random draw), both sides at the same activation.
+    """
+    sparse = [arms[x] for x in _labels_of(arms, "grnn_sparse")]
+    plan = [(a.label, b.label, _PANEL_BUDGETS, _SAME_DELAYED) for a in sparse for b in sparse
+            if a.linear == b.linear and a.kinds == ("per_node",) and b.kinds == ()]
+    plan += [(a.label, b.label, _PANEL_BUDGETS, _SAME_DELAYED) for a in sparse for b in sparse
+             if a.linear == b.linear and len(a.kinds) == 2 and a.kinds[0] == "per_node" and b.kinds == ("per_node",)]
+    return plan
+
+
+def _bound_plan(arms: Mapping[str, _Arm], delayed: list[str]) -> list[tuple]:
+    """The ``delayed`` designs and SLS on the plant graph against the SLS bound, at any number of links."""
+    plant_sls = [a.label for a in arms.values() if a.method in _SLS and a.graph == "plant"
+                 and a.label != BOUND_LABEL]
+    return [(a, BOUND_LABEL, (None,), "same information model: delayed, against the SLS bound")
+            for a in delayed + plant_sls]
+
+
+def _cross_plan(arms: Mapping[str, _Arm]) -> list[tuple]:
+    """Cross-model context: GRNN-Sparse against the instantaneous ℓ1 and decentralized gains, GCNN against ℓ1."""
+    instantaneous = _labels_of(arms, "sparse_admm") or _labels_of(arms, "sparse_sdp")
+    tanh_sparse = _labels_of(arms, "grnn_sparse", linear=False)
+    # For the paper's GRNN-Sparse only, where other kinds of it stand beside it.
     tanh_sparse = [x for x in tanh_sparse if not arms[x].kinds] or tanh_sparse
-    cross = [(a, b, budgets) for a in tanh_sparse for b in instantaneous]
-    cross += [(a, b, budgets) for a in tanh_sparse for b in by_method("decentralized")]
-    cross += [(a, b, (None,)) for a in by_method("gcnn") for b in instantaneous]
-    plan += [(a, b, bs, _group(arms[a].info_model, arms[b].info_model)) for a, b, bs in cross]
-    asked = {(a, b) for a, b, _, _ in plan}
+    cross = [(a, b, _PANEL_BUDGETS) for a in tanh_sparse for b in instantaneous]
+    cross += [(a, b, _PANEL_BUDGETS) for a in tanh_sparse for b in _labels_of(arms, "decentralized")]
+    cross += [(a, b, (None,)) for a in _labels_of(arms, "gcnn") for b in instantaneous]
+    return [(a, b, bs, _group(arms[a].info_model, arms[b].info_model)) for a, b, bs in cross]
+
+
+def _asked_plan(arms: Mapping[str, _Arm], pairs: Iterable, asked: set) -> list[tuple]:
+    """The spec's ``pairs`` not already ``asked`` (in either order), within each panel's budgets."""
+    asked, plan = set(asked), []
     for first, second in pairs:
         for a in _resolve(first, arms):
             for b in _resolve(second, arms):
                 if a != b and (a, b) not in asked and (b, a) not in asked:
                     asked.add((a, b))
-                    plan.append((a, b, budgets, _group(arms[a].info_model, arms[b].info_model)))
+                    plan.append((a, b, _PANEL_BUDGETS, _group(arms[a].info_model, arms[b].info_model)))
     return plan
 
 
@@ -392,7 +425,7 @@ def _group_rank(group: str) -> tuple:
 
     (Ties keep the plan's order: the sort is stable.)
     """
-    if group == "same information model: delayed":
+    if group == _SAME_DELAYED:
         return (0,)
     if "bound" in group:
         return (1,)

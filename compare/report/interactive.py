@@ -431,6 +431,18 @@ def _front_hover(label: str, budgets, cost) -> list[str]:
 # --- the figures ------------------------------------------------------------------------------------------------
 
 
+#: What the marks of :func:`cost_links_figure` mean (the page writes it above the panels).
+_COST_LINKS_KEY = ("line: each method's budget front, the median over instances of its best cost within L links · "
+                   "marker: one setting's medians, where on or above its method's front · faint: every design "
+                   "· ▲ on the top edge: above the axis (hover for the value)")
+#: What :func:`budget_fronts_figure`'s marks mean.
+_BUDGET_FRONTS_KEY = ("line: median over instances of the best cost within L links, from the budget where more "
+                      "than half of the instances have a design (marker) · band: 25–75 % across instances · ▲ on "
+                      "the top edge: a front above the axis (hover for the value)")
+#: Added to either key where some panel draws the QI boundary.
+_BOUNDARY_KEY = " · dotted: QI boundary"
+
+
 def cost_links_figure(records, styles: Mapping, *, boundaries: Mapping | None = None, title: str | None = None,
                       instances: Mapping | None = None) -> go.Figure:
     """Every design, each method's budget front and its settings' medians, one subplot per panel.
@@ -475,7 +487,6 @@ def cost_links_figure(records, styles: Mapping, *, boundaries: Mapping | None = 
     limits = y_limits(axis_costs(points, fronts)) if shared_y(panels) else None
     fig, cells, rows, cols = _new_figure(panels, titles)
     axes, shown_legend = {}, set()
-    by_panel_label = usable.by_panel_label
     any_boundary = False
     for panel in panels:
         mine_points = [p for p in points if p.panel == panel]
@@ -483,65 +494,112 @@ def cost_links_figure(records, styles: Mapping, *, boundaries: Mapping | None = 
         bottom, top = limits or y_limits(axis_costs(mine_points, mine_fronts.values()))
         right = max((r.links for r in usable if r.instance.panel == panel), default=1)
         ax = axes[panel] = _Axes(panel, per_node, bottom, top * 1.3, right)
-        row, col = cells[panel]
-        written = _stacked_labels(ax, [(ax.x(p.x)[0], p.cost[1]) for p in mine_points
-                                       if p.reached and p.cost[1] > OFF_SCALE])
-        for label in order:
-            rs = by_panel_label.get((panel, label))
-            if not rs:
-                continue
-            style = styles[label]
-            entry = _legend_entry(label, styles, order, shown_legend)
-            open_symbol = style.plotly_symbol.endswith("-open")
-            fig.add_trace(go.Scatter(
-                x=ax.x([r.links for r in rs]), y=ax.y([r.cost for r in rs]), mode="markers",
-                marker={"color": style.colour, "symbol": style.plotly_symbol, "size": 6, "opacity": 0.3,
-                        "line": {"width": 1, "color": style.colour} if open_symbol else {"width": 0}},
-                text=[_design_hover(r, varying[label]) for r in rs], hovertemplate="%{text}<extra></extra>",
-                meta=_meta("designs", label, panel), **entry), row=row, col=col)
-            front = mine_fronts.get(label)
-            if front is not None and np.isfinite(front.cost[1]).any():
-                x = ax.x(front.budgets) + [ax.right]
-                hover = _front_hover(label, front.budgets, front.cost)
-                fig.add_trace(go.Scatter(
-                    x=x, y=ax.y(np.append(front.cost[1], front.cost[1][-1])), mode="lines", connectgaps=False,
-                    line={"color": style.colour, "dash": style.dash, "shape": "hv", "width": 1.8},
-                    text=hover + hover[-1:], hovertemplate="%{text}<extra></extra>",
-                    meta=_meta("front", label, panel), **_group(entry)), row=row, col=col)
-            settings = sorted((p for p in mine_points if p.label == label and p.reached),
-                              key=lambda p: (p.x, p.cost[1], p.params_key))
-            inside = [p for p in settings if p.cost[1] <= OFF_SCALE]  # at or below the axis' top, by its choice
-            if inside:
-                fig.add_trace(go.Scatter(
-                    x=ax.x([p.x for p in inside]), y=ax.y([p.cost[1] for p in inside]), mode="markers",
-                    cliponaxis=False,
-                    marker=_marker(style, 10 if style.plotly_symbol == "star" else 8),
-                    text=[f"<b>{label}</b><br>median of {p.ok} designs: {_params_hover(p.params, varying[label])}"
-                          f"<br>links {p.x:g} (median)<br>cost J = {p.cost[1]:.5g} (median; excess "
-                          f"{_percent(p.cost[1] - 1.0)})<br>reached on {p.reach:.0%} of the instances"
-                          for p in inside],
-                    hovertemplate="%{text}<extra></extra>", meta=_meta("setting", label, panel), **_group(entry)),
-                    row=row, col=col)
-            # What lies above the axis: designs (faint) and settings' medians, as triangles on the top edge.
-            up = [(r.links, r.cost, _design_hover(r, varying[label]), 6, 0.35, "") for r in rs
-                  if ax.above(r.cost)[0]]
-            up += [(p.x, p.cost[1], f"<b>{label}</b><br>median of {p.ok} designs: "
-                    f"{_params_hover(p.params, varying[label])}<br>links {p.x:g}<br>cost J = {p.cost[1]:.4g}, "
-                    "above the axis", 11, 1.0, written[(ax.x(p.x)[0], p.cost[1])]) for p in settings
-                   if p.cost[1] > OFF_SCALE]
-            if up:
-                fig.add_trace(_off_scale_trace(ax, label, style, ax.x([u[0] for u in up]), [u[1] - 1.0 for u in up],
-                                               [u[2] for u in up], [u[3] for u in up], [u[4] for u in up],
-                                               [u[5] for u in up], _group(entry)), row=row, col=col)
-        if boundaries and panel in boundaries and any(p.info_model == "delayed" for p in mine_points):
-            fig.add_trace(_boundary_trace(ax, float(boundaries[panel]), shown_legend), row=row, col=col)
-            any_boundary = True
-    key = ("line: each method's budget front, the median over instances of its best cost within L links · "
-           "marker: one setting's medians, where on or above its method's front · faint: every design "
-           "· ▲ on the top edge: above the axis (hover for the value)"
-           + (" · dotted: QI boundary" if any_boundary else ""))
-    return _finish(fig, axes, cells, rows, cols, per_node, y_title="excess cost over LQR (J − 1)", key=key,
+        traces = _cost_links_panel(ax, mine_points, mine_fronts, usable.by_panel_label, order, styles, varying,
+                                   shown_legend)
+        boundary = _boundary_traces(ax, boundaries, any(p.info_model == "delayed" for p in mine_points),
+                                    shown_legend)
+        any_boundary |= bool(boundary)
+        _add_traces(fig, traces + boundary, cells[panel])
+    return _finish(fig, axes, cells, rows, cols, per_node, y_title="excess cost over LQR (J − 1)",
+                   key=_COST_LINKS_KEY + (_BOUNDARY_KEY if any_boundary else ""),
                    legend=_legend_meta(order, styles, any_boundary), titles=titles, title=title)
+
+
+def _add_traces(fig: go.Figure, traces: list, cell: tuple[int, int]) -> None:
+    for trace in traces:
+        fig.add_trace(trace, row=cell[0], col=cell[1])
+
+
+def _boundary_traces(ax: _Axes, boundaries: Mapping | None, delayed: bool, shown: set) -> list:
+    """The QI boundary, on a panel with a delayed method where the plant graph's link count is known."""
+    if boundaries and ax.panel in boundaries and delayed:
+        return [_boundary_trace(ax, float(boundaries[ax.panel]), shown)]
+    return []
+
+
+def _cost_links_panel(ax: _Axes, points: list, fronts: dict, designs: Mapping, order: list[str], styles: Mapping,
+                      varying: dict, shown: set) -> list:
+    """One panel's traces of :func:`cost_links_figure`, method by method in legend order.
+
+    ``points`` and ``fronts`` (label -> front) are the panel's, ``designs`` the usable
+    records by (panel, label) and ``shown`` the labels that already have a legend entry.
+    """
+    written = _stacked_labels(ax, [(ax.x(p.x)[0], p.cost[1]) for p in points if p.reached and p.cost[1] > OFF_SCALE])
+    traces = []
+    for label in order:
+        rs = designs.get((ax.panel, label))
+        if not rs:
+            continue
+        entry = _legend_entry(label, styles, order, shown)
+        settings = sorted((p for p in points if p.label == label and p.reached),
+                          key=lambda p: (p.x, p.cost[1], p.params_key))
+        traces += _method_traces(ax, label, styles[label], entry, rs, fronts.get(label), settings, varying[label],
+                                 written)
+    return traces
+
+
+def _method_traces(ax: _Axes, label: str, style, entry: dict, rs, front, settings: list, varying: list[str],
+                   written: dict) -> list:
+    """A method's traces on a panel: its designs, its budget front where it has one, its reached settings'
+    medians on the axis, and what lies above the axis."""
+    traces = [_designs_trace(ax, label, style, entry, rs, varying)]
+    if front is not None and np.isfinite(front.cost[1]).any():
+        traces.append(_front_line_trace(ax, label, style, _group(entry), front))
+    inside = [p for p in settings if p.cost[1] <= OFF_SCALE]  # at or below the axis' top, by its choice
+    if inside:
+        traces.append(_settings_trace(ax, label, style, _group(entry), inside, varying))
+    up = _above_axis(ax, label, rs, settings, varying, written)
+    if up:
+        traces.append(_off_scale_trace(ax, label, style, ax.x([u[0] for u in up]), [u[1] - 1.0 for u in up],
+                                       [u[2] for u in up], [u[3] for u in up], [u[4] for u in up],
+                                       [u[5] for u in up], _group(entry)))
+    return traces
+
+
+def _designs_trace(ax: _Axes, label: str, style, entry: dict, rs, varying: list[str]) -> go.Scatter:
+    """Every usable design of a method, faintly; hovering one names it."""
+    open_symbol = style.plotly_symbol.endswith("-open")
+    return go.Scatter(
+        x=ax.x([r.links for r in rs]), y=ax.y([r.cost for r in rs]), mode="markers",
+        marker={"color": style.colour, "symbol": style.plotly_symbol, "size": 6, "opacity": 0.3,
+                "line": {"width": 1, "color": style.colour} if open_symbol else {"width": 0}},
+        text=[_design_hover(r, varying) for r in rs], hovertemplate="%{text}<extra></extra>",
+        meta=_meta("designs", label, ax.panel), **entry)
+
+
+def _front_line_trace(ax: _Axes, label: str, style, group: dict, front) -> go.Scatter:
+    """A budget front's median as a step line to the axis' right edge."""
+    x = ax.x(front.budgets) + [ax.right]
+    hover = _front_hover(label, front.budgets, front.cost)
+    return go.Scatter(
+        x=x, y=ax.y(np.append(front.cost[1], front.cost[1][-1])), mode="lines", connectgaps=False,
+        line={"color": style.colour, "dash": style.dash, "shape": "hv", "width": 1.8},
+        text=hover + hover[-1:], hovertemplate="%{text}<extra></extra>",
+        meta=_meta("front", label, ax.panel), **group)
+
+
+def _settings_trace(ax: _Axes, label: str, style, group: dict, settings: list, varying: list[str]) -> go.Scatter:
+    """The settings' median (links, cost) as unconnected markers."""
+    return go.Scatter(
+        x=ax.x([p.x for p in settings]), y=ax.y([p.cost[1] for p in settings]), mode="markers",
+        cliponaxis=False,
+        marker=_marker(style, 10 if style.plotly_symbol == "star" else 8),
+        text=[f"<b>{label}</b><br>median of {p.ok} designs: {_params_hover(p.params, varying)}"
+              f"<br>links {p.x:g} (median)<br>cost J = {p.cost[1]:.5g} (median; excess "
+              f"{_percent(p.cost[1] - 1.0)})<br>reached on {p.reach:.0%} of the instances"
+              for p in settings],
+        hovertemplate="%{text}<extra></extra>", meta=_meta("setting", label, ax.panel), **group)
+
+
+def _above_axis(ax: _Axes, label: str, rs, settings: list, varying: list[str], written: dict) -> list[tuple]:
+    """What of a method lies above the axis, as (links, cost, hover, size, opacity, text) of its triangle on the
+    top edge: its designs (faint) and its settings' medians above OFF_SCALE (their values written under)."""
+    up = [(r.links, r.cost, _design_hover(r, varying), 6, 0.35, "") for r in rs if ax.above(r.cost)[0]]
+    up += [(p.x, p.cost[1], f"<b>{label}</b><br>median of {p.ok} designs: "
+            f"{_params_hover(p.params, varying)}<br>links {p.x:g}<br>cost J = {p.cost[1]:.4g}, "
+            "above the axis", 11, 1.0, written[(ax.x(p.x)[0], p.cost[1])]) for p in settings
+           if p.cost[1] > OFF_SCALE]
+    return up
 
 
 def budget_fronts_figure(fronts, styles: Mapping, *, boundaries: Mapping | None = None,
@@ -572,12 +630,35 @@ def budget_fronts_figure(fronts, styles: Mapping, *, boundaries: Mapping | None 
     panels = _panel_order(f.panel for f in fronts)
     per_node = len({p[1] for p in panels}) > 1
     order = _label_order({f.label for f in fronts}, styles)
+    titles, notes = _fronts_titles(panels, fronts)
 
-    def shown(group):
-        finite = [c for f in group for c in f.cost[1] if np.isfinite(c)]
-        return [c for c in finite if c <= OFF_SCALE]
+    limits = y_limits(_shown_medians(fronts)) if shared_y(panels) else None
+    fig, cells, rows, cols = _new_figure(panels, titles)
+    axes, shown_legend = {}, set()
+    any_boundary = False
+    for panel in panels:
+        mine = {f.label: f for f in fronts if f.panel == panel}
+        bottom, top = limits or y_limits(_shown_medians(mine.values()))
+        ax = axes[panel] = _Axes(panel, per_node, bottom, top * 1.25, max(float(f.budgets[-1]) for f in mine.values()))
+        traces = _budget_fronts_panel(ax, mine, order, styles, shown_legend)
+        boundary = _boundary_traces(ax, boundaries, any(f.info_model == "delayed" for f in mine.values()),
+                                    shown_legend)
+        any_boundary |= bool(boundary)
+        _add_traces(fig, traces + boundary, cells[panel])
+    return _finish(fig, axes, cells, rows, cols, per_node, y_title="best excess cost over LQR within ≤ L links",
+                   key=_BUDGET_FRONTS_KEY + (_BOUNDARY_KEY if any_boundary else ""),
+                   legend=_legend_meta(order, styles, any_boundary), titles=titles, notes=notes,
+                   title=title)
 
-    limits = y_limits(shown(fronts)) if shared_y(panels) else None
+
+def _shown_medians(fronts) -> list[float]:
+    """The costs a budget-front axis must show: the fronts' finite medians up to OFF_SCALE."""
+    finite = [c for f in fronts for c in f.cost[1] if np.isfinite(c)]
+    return [c for c in finite if c <= OFF_SCALE]
+
+
+def _fronts_titles(panels: list[tuple], fronts) -> tuple[dict, dict]:
+    """Panel -> its title, and panel -> its notes (the methods with designs on some instances only)."""
     titles, notes = {}, {}
     for panel in panels:
         mine = [f for f in fronts if f.panel == panel]
@@ -585,60 +666,59 @@ def budget_fronts_figure(fronts, styles: Mapping, *, boundaries: Mapping | None 
         partial = [f"{f.label} ({f.covered} of {f.instances})" for f in mine if 0 < f.covered < f.instances]
         if partial:
             notes[panel] = ["designs on some instances only: " + ", ".join(partial)]
-    fig, cells, rows, cols = _new_figure(panels, titles)
-    axes, shown_legend = {}, set()
-    any_boundary = False
-    for panel in panels:
-        mine = {f.label: f for f in fronts if f.panel == panel}
-        bottom, top = limits or y_limits(shown(mine.values()))
-        ax = axes[panel] = _Axes(panel, per_node, bottom, top * 1.25, max(float(f.budgets[-1]) for f in mine.values()))
-        row, col = cells[panel]
-        lowest = {label: float(np.min(f.cost[1])) for label, f in mine.items()}
-        written = _stacked_labels(ax, [(ax.x(mine[label].start)[0], c) for label, c in lowest.items() if c > OFF_SCALE])
-        for label in order:
-            if label not in mine:
-                continue
-            f, style = mine[label], styles[label]
-            entry = _legend_entry(label, styles, order, shown_legend)
-            x = ax.x(f.budgets) + [ax.right]
-            hover = _front_hover(label, f.budgets, f.cost)
-            hover.append(hover[-1])
-            q1, med, q3 = (np.append(row_, row_[-1]) for row_ in f.cost)
-            low = ax.y(q1)
-            high = [None if lo is None else (ax.top if not np.isfinite(v) else hi)
-                    for lo, v, hi in zip(low, q3, ax.y(np.where(np.isfinite(q3), q3, 1.0)))]
-            band = {"x": x, "mode": "lines", "line": {"width": 0, "shape": "hv"}, "hoverinfo": "skip",
-                    "connectgaps": False, **_group(entry)}
-            fig.add_trace(go.Scatter(y=low, meta=_meta("band", label, panel), **band), row=row, col=col)
-            fig.add_trace(go.Scatter(y=high, fill="tonexty", fillcolor=_rgba(style.colour, 0.1),
-                                     meta=_meta("band", label, panel), **band), row=row, col=col)
-            y = ax.y(med)
-            start = next(i for i, v in enumerate(y) if v is not None)
-            if y[start] > ax.top:
-                start = -1  # a start above the axis has no marker there (an off-scale triangle if all is above)
-            fig.add_trace(go.Scatter(
-                x=x, y=y, mode="lines+markers", connectgaps=False, cliponaxis=False,
-                line={"color": style.colour, "dash": style.dash, "shape": "hv", "width": 2},
-                marker=_marker(style, [(10 if style.plotly_symbol == "star" else 8) if i == start else 0
-                                       for i in range(len(y))]),
-                text=hover, hovertemplate="%{text}<extra></extra>", meta=_meta("front", label, panel), **entry),
-                row=row, col=col)
-            if lowest[label] > OFF_SCALE:
-                x0 = ax.x(f.start)[0]
-                fig.add_trace(_off_scale_trace(
-                    ax, label, style, [x0], [lowest[label] - 1.0],
-                    [f"<b>{label}</b><br>its whole front is above the axis<br>from ≤ {f.start:g} links: median "
-                     f"J = {lowest[label]:.4g} at best"], [11], [1.0], [written[(x0, lowest[label])]], _group(entry)),
-                    row=row, col=col)
-        if boundaries and panel in boundaries and any(f.info_model == "delayed" for f in mine.values()):
-            fig.add_trace(_boundary_trace(ax, float(boundaries[panel]), shown_legend), row=row, col=col)
-            any_boundary = True
-    key = ("line: median over instances of the best cost within L links, from the budget where more than half of "
-           "the instances have a design (marker) · band: 25–75 % across instances · ▲ on the top edge: a front "
-           "above the axis (hover for the value)" + (" · dotted: QI boundary" if any_boundary else ""))
-    return _finish(fig, axes, cells, rows, cols, per_node, y_title="best excess cost over LQR within ≤ L links",
-                   key=key, legend=_legend_meta(order, styles, any_boundary), titles=titles, notes=notes,
-                   title=title)
+    return titles, notes
+
+
+def _budget_fronts_panel(ax: _Axes, fronts: dict, order: list[str], styles: Mapping, shown: set) -> list:
+    """One panel's traces of :func:`budget_fronts_figure` (``fronts``: label -> the panel's front), in legend
+    order; ``shown`` holds the labels that already have a legend entry."""
+    lowest = {label: float(np.min(f.cost[1])) for label, f in fronts.items()}
+    written = _stacked_labels(ax, [(ax.x(fronts[label].start)[0], c) for label, c in lowest.items() if c > OFF_SCALE])
+    traces = []
+    for label in order:
+        if label in fronts:
+            entry = _legend_entry(label, styles, order, shown)
+            traces += _front_traces(ax, label, fronts[label], styles[label], entry, lowest[label], written)
+    return traces
+
+
+def _front_traces(ax: _Axes, label: str, f, style, entry: dict, lowest: float, written: dict) -> list:
+    """A front's traces: its 25–75 % band, its median step line with its start marked, and a triangle on the
+    top edge where the whole front lies above the axis."""
+    x = ax.x(f.budgets) + [ax.right]
+    hover = _front_hover(label, f.budgets, f.cost)
+    hover.append(hover[-1])
+    q1, med, q3 = (np.append(row, row[-1]) for row in f.cost)
+    traces = _band_traces(ax, label, style, _group(entry), x, q1, q3)
+    y = ax.y(med)
+    start = next(i for i, v in enumerate(y) if v is not None)
+    if y[start] > ax.top:
+        start = -1  # a start above the axis has no marker there (an off-scale triangle if all is above)
+    traces.append(go.Scatter(
+        x=x, y=y, mode="lines+markers", connectgaps=False, cliponaxis=False,
+        line={"color": style.colour, "dash": style.dash, "shape": "hv", "width": 2},
+        marker=_marker(style, [(10 if style.plotly_symbol == "star" else 8) if i == start else 0
+                               for i in range(len(y))]),
+        text=hover, hovertemplate="%{text}<extra></extra>", meta=_meta("front", label, ax.panel), **entry))
+    if lowest > OFF_SCALE:
+        x0 = ax.x(f.start)[0]
+        traces.append(_off_scale_trace(
+            ax, label, style, [x0], [lowest - 1.0],
+            [f"<b>{label}</b><br>its whole front is above the axis<br>from ≤ {f.start:g} links: median "
+             f"J = {lowest:.4g} at best"], [11], [1.0], [written[(x0, lowest)]], _group(entry)))
+    return traces
+
+
+def _band_traces(ax: _Axes, label: str, style, group: dict, x: list, q1, q3) -> list:
+    """The 25 % and 75 % quantile lines, filled between; a 75 % quantile at infinity at the axis' top."""
+    low = ax.y(q1)
+    high = [None if lo is None else (ax.top if not np.isfinite(v) else hi)
+            for lo, v, hi in zip(low, q3, ax.y(np.where(np.isfinite(q3), q3, 1.0)))]
+    band = {"x": x, "mode": "lines", "line": {"width": 0, "shape": "hv"}, "hoverinfo": "skip",
+            "connectgaps": False, **group}
+    return [go.Scatter(y=low, meta=_meta("band", label, ax.panel), **band),
+            go.Scatter(y=high, fill="tonexty", fillcolor=_rgba(style.colour, 0.1),
+                       meta=_meta("band", label, ax.panel), **band)]
 
 
 def _rgba(colour: str, alpha: float) -> str:

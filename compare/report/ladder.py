@@ -165,41 +165,65 @@ def ladder_table(records, ladder: Mapping) -> dict:
     """
     records = as_records(records)
     budgets = [float(b) for b in ladder["budgets"]]
+    by_system, specs = _by_system(records)
+    names = system_names(specs)
+    entries = _entries(records, ladder["methods"])
+    zero, first, rungs = {}, {}, {}
+    for system, instances in by_system.items():
+        zero[system] = _best_without_links(instances)
+        first[system] = _best_within_first(instances, budgets[0])
+        for name, labels in entries:
+            rung = _rung(instances, labels, budgets)
+            if rung is not None:
+                rungs[(system, name)] = rung
+    order = sorted(by_system, key=lambda s: _order(specs[s]))
+    return {"systems": [(s, names[s]) for s in order], "zero": zero, "first": first, "rungs": rungs,
+            "entries": [name for name, _ in entries]}
+
+
+def _by_system(records: Records) -> tuple[dict[str, dict[str, Records]], dict[str, Mapping]]:
+    """System -> instance key -> its records, and system -> the spec of its first instance."""
     by_system: dict[str, dict[str, Records]] = {}
     specs: dict[str, Mapping] = {}
     for key, rs in records.by_instance.items():
         system = _system(rs[0].instance.spec)
         by_system.setdefault(system, {})[key] = rs
         specs.setdefault(system, rs[0].instance.spec)
-    names = system_names(specs)
-    entries = _entries(records, ladder["methods"])
-    zero, first, rungs = {}, {}, {}
-    for system, instances in by_system.items():
-        choices = [r for rs in instances.values() for r in rs if r.method != "autonomous" and r.ok and r.links == 0]
-        # Named after the diagonal gain where it is as good (every path ends there), else the best.
-        low = min((r.cost for r in choices), default=math.inf)
-        tied = [r for r in choices if r.cost <= low + 1e-9 * abs(low)]
-        named = next((r for r in tied if r.method == "decentralized"), tied[0] if tied else None)
-        zero[system] = (low, named.label if named else None)
-        # Every method's best within the first budget (the claim is about the best design, of any method).
-        per_label: dict[str, list] = {}
-        for rs in instances.values():
-            for label, mine in rs.filter(lambda r: r.method not in _REFERENCES).by_label.items():
-                per_label.setdefault(label, []).append(mine)
-        firsts = sorted((_median_over(v, budgets[0]), label) for label, v in per_label.items())
-        first[system] = firsts[0] if firsts and math.isfinite(firsts[0][0]) else (math.inf, None)
-        for name, labels in entries:
-            mine = [rs.filter(lambda r, labels=labels: r.label in labels) for rs in instances.values()]
-            mine = [rs for rs in mine if len(rs)]
-            if not mine:
-                continue
-            usable = [r.links for rs in mine for r in rs if r.ok and r.links is not None]
-            statuses = Counter(r.status for rs in mine for r in rs) if not usable else {}
-            rungs[(system, name)] = Rung([_median_over(mine, b) for b in budgets], min(usable, default=None),
-                                         statuses)
-    order = sorted(by_system, key=lambda s: _order(specs[s]))
-    return {"systems": [(s, names[s]) for s in order], "zero": zero, "first": first, "rungs": rungs,
-            "entries": [name for name, _ in entries]}
+    return by_system, specs
+
+
+def _best_without_links(instances: Mapping[str, Records]) -> tuple[float, str | None]:
+    """(cost, label) of the best design with no link, of any method but u = 0, on one system."""
+    choices = [r for rs in instances.values() for r in rs if r.method != "autonomous" and r.ok and r.links == 0]
+    # Named after the diagonal gain where it is as good (every path ends there), else the best.
+    low = min((r.cost for r in choices), default=math.inf)
+    tied = [r for r in choices if r.cost <= low + 1e-9 * abs(low)]
+    named = next((r for r in tied if r.method == "decentralized"), tied[0] if tied else None)
+    return low, named.label if named else None
+
+
+def _best_within_first(instances: Mapping[str, Records], budget: float) -> tuple[float, str | None]:
+    """(median cost, label) of the best label within ``budget`` on one system, of any method but LQR and u = 0.
+
+    Of any method: the claim is about the best design, whichever method found it.
+    """
+    per_label: dict[str, list] = {}
+    for rs in instances.values():
+        for label, mine in rs.filter(lambda r: r.method not in _REFERENCES).by_label.items():
+            per_label.setdefault(label, []).append(mine)
+    firsts = sorted((_median_over(v, budget), label) for label, v in per_label.items())
+    return firsts[0] if firsts and math.isfinite(firsts[0][0]) else (math.inf, None)
+
+
+def _rung(instances: Mapping[str, Records], labels: frozenset, budgets: Sequence[float]) -> Rung | None:
+    """The :class:`Rung` of the designs labelled ``labels`` on one system; None where it has none."""
+    mine = [rs.filter(lambda r: r.label in labels) for rs in instances.values()]
+    mine = [rs for rs in mine if len(rs)]
+    if not mine:
+        return None
+    usable = [r.links for rs in mine for r in rs if r.ok and r.links is not None]
+    statuses = Counter(r.status for rs in mine for r in rs) if not usable else {}
+    return Rung([_median_over(mine, b) for b in budgets], min(usable, default=None), statuses)
 
 
 def _order(spec: Mapping) -> tuple:
@@ -270,8 +294,19 @@ def verdict_sentence(table: Mapping, ladder: Mapping) -> str:
     zero = {s: table["zero"][s][0] for s, _ in systems}
     best = {s: table["first"][s][0] for s, _ in systems}  # of every method: a design with no link included
     held = [(s, n) for s, n in systems if best[s] <= bound]
-    trivial = [(s, n) for s, n in held if zero[s] <= bound]
     within = f"within {_plural(first, 'link')}"
+    text = _verdict_opening(ladder, within, held, systems)
+    trivial = [(s, n) for s, n in held if zero[s] <= bound]
+    if trivial:
+        text += _trivial_clause(table, trivial, held, systems, near)
+    text += _missed_clauses(table, [(s, n) for s, n in systems if (s, n) not in held], within)
+    text += _gap_clause(systems, zero, best, first)
+    return text + "."
+
+
+def _verdict_opening(ladder: Mapping, within: str, held: list, systems: list) -> str:
+    """The spec's claim (or the test itself), and on how many systems it holds: which, where not on all."""
+    near = ladder["near"]
     test = (f"some design {within} (links counted between nodes) costing at most {near:g} % more than LQR")
     claim = ladder.get("claim", "").strip().rstrip(".")
     count = _systems_phrase(len(held), len(systems))
@@ -280,14 +315,23 @@ def verdict_sentence(table: Mapping, ladder: Mapping) -> str:
                  f"{count}")
     if held and len(held) < len(systems):
         text += f" ({join_words([n for _, n in held])})"
-    if trivial:
-        label = {table["zero"][s][1] for s, _ in trivial}
-        who = label.pop() if len(label) == 1 else "the best design with no link"
-        where = ("" if len(systems) == 1 else f" on each{'' if len(held) == len(systems) else ' of them'}"
-                 if len(trivial) == len(held) else f" on {join_words([n for _, n in trivial])}")
-        text += (f"{', trivially' if len(trivial) == len(held) else ''}: with no link at all {who} is already within "
-                 f"{near:g} % of LQR{where} ({_range([zero[s] for s, _ in trivial])})")
-    missed = [(s, n) for s, n in systems if (s, n) not in held]
+    return text
+
+
+def _trivial_clause(table: Mapping, trivial: list, held: list, systems: list, near: float) -> str:
+    """Where the claim holds without any link: the best design with no link is already within ``near`` %."""
+    label = {table["zero"][s][1] for s, _ in trivial}
+    who = label.pop() if len(label) == 1 else "the best design with no link"
+    where = ("" if len(systems) == 1 else f" on each{'' if len(held) == len(systems) else ' of them'}"
+             if len(trivial) == len(held) else f" on {join_words([n for _, n in trivial])}")
+    return (f"{', trivially' if len(trivial) == len(held) else ''}: with no link at all {who} is already within "
+            f"{near:g} % of LQR{where} ({_range([table['zero'][s][0] for s, _ in trivial])})")
+
+
+def _missed_clauses(table: Mapping, missed: list, within: str) -> str:
+    """Where the claim fails: the best cost within the first budget, or that there is no usable design."""
+    best = {s: table["first"][s][0] for s, _ in missed}
+    text = ""
     costs = [f"{n} {_pct(best[s])}{' %' if best[s] < 10 else ''} ({table['first'][s][1]})" for s, n in missed
              if math.isfinite(best[s])]
     if costs:
@@ -295,14 +339,18 @@ def verdict_sentence(table: Mapping, ladder: Mapping) -> str:
     nothing = [n for s, n in missed if not math.isfinite(best[s])]
     if nothing:
         text += f"; {join_words(nothing)} {'has' if len(nothing) == 1 else 'have'} no usable design {within}"
+    return text
+
+
+def _gap_clause(systems: list, zero: Mapping, best: Mapping, first) -> str:
+    """How much of the gap between no link and LQR the first budget closes, over the systems: "" where unknown."""
     closed = [(zero[s] - best[s]) / (zero[s] - 1) for s, _ in systems
               if math.isfinite(zero[s]) and zero[s] > 1 and math.isfinite(best[s])]
-    if closed:
-        low, high = 100 * max(0.0, min(closed)), 100 * max(closed)
-        share = f"{low:.0f} %" if f"{low:.0f}" == f"{high:.0f}" else f"{low:.0f}–{high:.0f} %"
-        text += (f"; {_plural(first, 'link')} closes {share} of the gap between the best design with no link and "
-                 "LQR")
-    return text + "."
+    if not closed:
+        return ""
+    low, high = 100 * max(0.0, min(closed)), 100 * max(closed)
+    share = f"{low:.0f} %" if f"{low:.0f}" == f"{high:.0f}" else f"{low:.0f}–{high:.0f} %"
+    return f"; {_plural(first, 'link')} closes {share} of the gap between the best design with no link and LQR"
 
 
 def ladder_lines(records, meta=None, members=None) -> tuple[list[str], list[str]]:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import sys
 import time
 import warnings
 from contextlib import contextmanager
@@ -349,20 +350,19 @@ def limit_threads() -> None:
     variables alone come too late for it (measured: two workers each ran 2-thread
     OpenBLAS on 2 cores, and numpy-bound methods at N = 100 took 3-20x their
     single-process time). threadpoolctl caps the pools already loaded; the variables
-    cover those loaded later (MKL in SCS, rayon in Clarabel, OpenMP), and torch is
-    set directly.
+    cover those loaded later (MKL in SCS, rayon in Clarabel, OpenMP, and torch, which
+    sizes its pool from OMP_NUM_THREADS when it is imported). A torch loaded already
+    is set directly; one not loaded is not imported here (1.5 s per worker, for the
+    many workers that never train).
     """
     for var in THREAD_VARS:
         os.environ[var] = "1"
     from threadpoolctl import threadpool_limits
 
     _LIMITS.append(threadpool_limits(limits=1))
-    try:
-        import torch
-
+    torch = sys.modules.get("torch")
+    if torch is not None:
         torch.set_num_threads(1)
-    except ImportError:  # pragma: no cover
-        pass
 
 
 class ExecutorError(ValueError):

@@ -61,6 +61,9 @@ _INSTANCE_ORDER = ("family", "n", "degree", "a_norm", "b_norm", "hops", "horizon
 _OUTCOME = ("cost", "cost_stderr", "cost_kind", "links", "self_loops", "info_model", "status", "message",
             "seconds", "controller_kind", "fingerprint", "run_seconds", "run_designs", "run_peak_mb",
             "run_scoring_seconds", "run_baseline_mb")
+#: Outcome columns that are measurements: float64 even where every value happens to be whole.
+_FLOAT_OUTCOME = frozenset(("cost", "cost_stderr", "seconds", "run_seconds", "run_peak_mb", "run_scoring_seconds",
+                            "run_baseline_mb"))
 _INSTALL = "pip install -e \".[analysis]\" (from a checkout) or pip install \"grnn-codesign[analysis]\""
 
 
@@ -154,40 +157,51 @@ def designs_frame(records, members: dict | None = None):
     """
     pd = require_pandas()
     records = as_records(records)
+    instance_keys = _instance_keys(records)
+    columns = _identity_columns(pd, records, members)
+    for key in instance_keys:
+        columns[key] = _column(pd, [r.instance.spec.get(key) for r in records], numbers="int")
+    for key in _OUTCOME:
+        numbers = "float" if key in _FLOAT_OUTCOME else "int"
+        columns[key] = _column(pd, [getattr(r, key) for r in records], numbers=numbers)
+    param_columns = param_column_names(sorted({k for r in records for k in r.params}), instance_keys)
+    for key, name in param_columns.items():
+        columns[name] = _column(pd, [r.params.get(key) for r in records], numbers="float")
+    columns["params"] = _column(pd, [r.params_key for r in records], numbers="float")
+    for key in _scalar_extra_keys(records):
+        columns[f"extra_{key}"] = _column(pd, [r.extras.get(key) for r in records], numbers="float")
+    return pd.DataFrame(columns, index=pd.RangeIndex(len(records)))
+
+
+def _identity_columns(pd, records, members: dict | None) -> dict:
+    """The columns that say which run made a design: ``experiment`` to ``label``."""
     in_experiments: dict[str, list[str]] = {}
     for name, keys in sorted((members or {}).items()):
         for key in keys:
             in_experiments.setdefault(key, []).append(name)
-
-    instance_keys = list(dict.fromkeys(k for inst in records.instances for k in inst.spec))
-    instance_keys = [k for k in _INSTANCE_ORDER if k in instance_keys] + sorted(
-        k for k in instance_keys if k not in _INSTANCE_ORDER)
-    param_columns = param_column_names(sorted({k for r in records for k in r.params}), instance_keys)
-    extras_seen: dict[str, bool] = {}
-    for r in records:
-        for key, value in r.extras.items():
-            extras_seen[key] = extras_seen.get(key, True) and _is_scalar(value)
-    extra_keys = sorted(k for k, scalar in extras_seen.items() if scalar)
-
-    columns = {}
-    columns["experiment"] = _column(pd, [r.experiment for r in records], numbers="int")
+    columns = {"experiment": _column(pd, [r.experiment for r in records], numbers="int")}
     columns["experiments"] = _column(
         pd, [",".join(in_experiments.get(r.run_key, [r.experiment] if r.experiment else [])) for r in records],
         numbers="int")
     for key in ("run_key", "idx", "method", "label"):
         columns[key] = _column(pd, [getattr(r, key) for r in records], numbers="int")
-    for key in instance_keys:
-        columns[key] = _column(pd, [r.instance.spec.get(key) for r in records], numbers="int")
-    for key in _OUTCOME:
-        numbers = "float" if key in ("cost", "cost_stderr", "seconds", "run_seconds", "run_peak_mb",
-                                     "run_scoring_seconds", "run_baseline_mb") else "int"
-        columns[key] = _column(pd, [getattr(r, key) for r in records], numbers=numbers)
-    for key, name in param_columns.items():
-        columns[name] = _column(pd, [r.params.get(key) for r in records], numbers="float")
-    columns["params"] = _column(pd, [r.params_key for r in records], numbers="float")
-    for key in extra_keys:
-        columns[f"extra_{key}"] = _column(pd, [r.extras.get(key) for r in records], numbers="float")
-    return pd.DataFrame(columns, index=pd.RangeIndex(len(records)))
+    return columns
+
+
+def _instance_keys(records) -> list[str]:
+    """The instance fields of ``records``: the usual ones in their usual order, then any other, sorted."""
+    instance_keys = list(dict.fromkeys(k for inst in records.instances for k in inst.spec))
+    return [k for k in _INSTANCE_ORDER if k in instance_keys] + sorted(
+        k for k in instance_keys if k not in _INSTANCE_ORDER)
+
+
+def _scalar_extra_keys(records) -> list[str]:
+    """The extras' keys, sorted, whose values are scalars in every design that has one (not training curves)."""
+    extras_seen: dict[str, bool] = {}
+    for r in records:
+        for key, value in r.extras.items():
+            extras_seen[key] = extras_seen.get(key, True) and _is_scalar(value)
+    return sorted(k for k, scalar in extras_seen.items() if scalar)
 
 
 def write_designs(frame, out: str | Path, fmt: str = "csv") -> Path:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import multiprocessing
 import pickle
+import socket
 import time
 import uuid
 from collections import Counter
@@ -112,6 +113,7 @@ def open_executor(address: str, workers: int):
     if address == "dask-local" or address.startswith(("dask://", "tcp://")):
         try:
             from distributed import Client, LocalCluster
+            from distributed.comm import parse_host_port
         except ImportError:  # pragma: no cover
             raise ExecutorError("dask.distributed is not installed: pip install 'dask[distributed]'") from None
         cluster = None
@@ -122,8 +124,10 @@ def open_executor(address: str, workers: int):
         else:
             target = "tcp://" + address.split("://", 1)[1]
             try:
+                # A refused connection answers at once; dask's client would retry it until its timeout.
+                socket.create_connection(parse_host_port(target[len("tcp://"):]), timeout=10).close()
                 client = Client(target, timeout="10s")
-            except (OSError, TimeoutError) as exc:
+            except (OSError, TimeoutError, ValueError) as exc:
                 raise ExecutorError(f"cannot reach the dask scheduler at {target}: {exc}") from None
         try:
             client.run(limit_threads)  # dask's nanny covers BLAS and OpenMP, not rayon
@@ -241,6 +245,109 @@ def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store, progress: 
         store.set_metas(store.instance_facts_entries(batch))
 
 
+def _pending_runs(runs: list[Run], store: Store) -> list[Run]:
+    """The runs of ``runs`` still to compute; those already stored take the spec's labels and instance specs."""
+    limits = store.timed_out()
+    # A run stored as stopped at its time limit is tried again when the spec now gives it longer.
+    store.forget(run.key for run in runs if run.key in limits
+                 and (getattr(run, "timeout", None) or float("inf")) > limits[run.key])
+    done = store.done_keys()
+    pending = [run for run in runs if run.key not in done]
+    store.relabel({run.key: run.label for run in runs if run.key in done})
+    store.redescribe({run.key: run.instance for run in runs if run.key in done})
+    return pending
+
+
+def _record_environment(spec: ExperimentSpec, store: Store, executor, workers: int) -> None:
+    """Store the machine and executor that compute this call's runs, for the report's compute section."""
+    executor_name = (executor if isinstance(executor, str)
+                     else "process" if executor is None or isinstance(executor, WorkerPool)
+                     else type(executor).__name__)
+    store.set_meta(meta_key(MetaKind.ENVIRONMENT, spec.name),
+                   environment(1 if executor is None and workers <= 1 else workers, executor_name))
+
+
+class _Sweep:
+    """The state one call of :func:`run_experiment` shares with the executors' callbacks.
+
+    Results are recorded as they arrive, each in its own transaction under this call's
+    claim ``owner``; the bar shows how many runs of each method are running.
+    """
+
+    def __init__(self, spec: ExperimentSpec, store: Store, summary: RunSummary, bar, executor, workers: int):
+        self.spec, self.store, self.summary, self.bar = spec, store, summary, bar
+        self.executor, self.workers = executor, workers
+        self.owner = uuid.uuid4().hex
+        self.running: Counter = Counter()
+
+    def record(self, run, designs, seconds, peak_mb=None, scoring_seconds=None, baseline_mb=None):
+        # The fields of a compare.run.execution.RunResult, in its order.
+        self.store.add_run(run, designs, experiment=self.spec.name, seconds=seconds, peak_mb=peak_mb,
+                           scoring_seconds=scoring_seconds, baseline_mb=baseline_mb, owner=self.owner)
+        self.summary.computed += 1
+        self.summary.statuses.update(d.status for d in designs)
+        self.bar.update(1)
+
+    def show(self, runs, sign):
+        for run in runs:
+            self.running[run.method] += sign
+        self.bar.set_postfix_str(", ".join(f"{m} ×{k}" for m, k in sorted(self.running.items()) if k > 0),
+                                 refresh=True)
+
+    def compute(self, todo: list[Run]) -> None:
+        """Compute ``todo`` (runs this call has claimed): in this process, or on the executor asked for."""
+        tasks = plan_tasks(todo)
+        if self.executor is None and self.workers <= 1:
+            for task in tasks:
+                self.show(task, 1)
+                # Through pickle as in a worker: a design that could not leave one fails here too.
+                for run, result in zip(task, sendable_results(task, execute_task(task))):
+                    self.record(run, *pickle.loads(result))
+                self.show(task, -1)
+        elif isinstance(self.executor, (Executor, WorkerPool)):
+            self.drain(self.executor, tasks)
+        else:
+            with open_executor(self.executor or "process", self.workers) as pool:
+                self.drain(pool, tasks)
+
+    def drain(self, pool, tasks: list[list[Run]]) -> None:
+        if isinstance(pool, WorkerPool):
+            pool.drain(tasks, self.spec.plugins, self.record, on_start=lambda runs: self.show(runs, 1),
+                       on_finish=lambda runs: self.show(runs, -1))
+        else:
+            _drain(pool, tasks, self.spec.plugins, self.record)
+
+    def until_stored(self, pending: list[Run], wait_for_others: bool, poll: float) -> None:
+        """Claim and compute ``pending`` until every run is stored, by this process or by others."""
+        told = False
+        while pending:
+            mine = set(self.store.claim([run.key for run in pending], self.owner))
+            if mine:
+                self.compute([run for run in pending if run.key in mine])
+            stored = self.store.done_keys()
+            left = [run for run in pending if run.key not in stored]
+            by_others = len(pending) - len(left) - len(mine & stored)
+            self.summary.by_others += by_others
+            self.bar.update(by_others)
+            pending = left
+            if not pending:
+                break
+            where = _claimants(self.store, pending)
+            if not wait_for_others:
+                raise StoreBusy(f"{len(pending)} runs are being computed by another process ({where}) "
+                                f"on {self.store.path}; run again when it has finished")
+            if not told:
+                self.bar.write(f"waiting for {len(pending)} runs being computed by another process ({where})")
+                told = True
+            time.sleep(poll)
+
+
+def _claimants(store: Store, runs: list[Run]) -> str:
+    """"pid 123 on host, ...": the processes whose claims hold ``runs``."""
+    others = {store.claims().get(run.key, (None, "?", 0))[1:] for run in runs}
+    return ", ".join(f"pid {pid} on {host}" for host, pid in sorted(others))
+
+
 def run_experiment(
     spec: ExperimentSpec,
     store: Store,
@@ -276,85 +383,17 @@ def run_experiment(
     start = time.perf_counter()
     runs = list({run.key: run for run in spec.runs()}.values())
     _record_meta(spec, runs, store, progress)
-    limits = store.timed_out()
-    # A run stored as stopped at its time limit is tried again when the spec now gives it longer.
-    store.forget(run.key for run in runs if run.key in limits
-                 and (getattr(run, "timeout", None) or float("inf")) > limits[run.key])
-    done = store.done_keys()
-    pending = [run for run in runs if run.key not in done]
-    store.relabel({run.key: run.label for run in runs if run.key in done})
-    store.redescribe({run.key: run.instance for run in runs if run.key in done})
+    pending = _pending_runs(runs, store)
     summary = RunSummary(total=len(runs), already_stored=len(runs) - len(pending))
     bar = tqdm(total=len(pending), desc=f"{spec.name}", unit="run", disable=not progress or not pending)
-    owner = uuid.uuid4().hex
-
-    def record(run, designs, seconds, peak_mb=None, scoring_seconds=None, baseline_mb=None):
-        # The fields of a compare.run.execution.RunResult, in its order.
-        store.add_run(run, designs, experiment=spec.name, seconds=seconds, peak_mb=peak_mb,
-                      scoring_seconds=scoring_seconds, baseline_mb=baseline_mb, owner=owner)
-        summary.computed += 1
-        summary.statuses.update(d.status for d in designs)
-        bar.update(1)
-
-    running: Counter = Counter()
-
-    def show(runs, sign):
-        for run in runs:
-            running[run.method] += sign
-        bar.set_postfix_str(", ".join(f"{m} ×{k}" for m, k in sorted(running.items()) if k > 0), refresh=True)
-
-    def drain(pool, tasks):
-        if isinstance(pool, WorkerPool):
-            pool.drain(tasks, spec.plugins, record, on_start=lambda runs: show(runs, 1),
-                       on_finish=lambda runs: show(runs, -1))
-        else:
-            _drain(pool, tasks, spec.plugins, record)
-
-    def compute(todo):
-        tasks = plan_tasks(todo)
-        if executor is None and workers <= 1:
-            for task in tasks:
-                show(task, 1)
-                # Through pickle as in a worker: a design that could not leave one fails here too.
-                for run, result in zip(task, sendable_results(task, execute_task(task))):
-                    record(run, *pickle.loads(result))
-                show(task, -1)
-        elif isinstance(executor, (Executor, WorkerPool)):
-            drain(executor, tasks)
-        else:
-            with open_executor(executor or "process", workers) as pool:
-                drain(pool, tasks)
-
+    sweep = _Sweep(spec, store, summary, bar, executor, workers)
     if pending:
-        executor_name = (executor if isinstance(executor, str)
-                         else "process" if executor is None or isinstance(executor, WorkerPool)
-                         else type(executor).__name__)
-        store.set_meta(meta_key(MetaKind.ENVIRONMENT, spec.name),
-                       environment(1 if executor is None and workers <= 1 else workers, executor_name))
-    told = False
+        _record_environment(spec, store, executor, workers)
     try:
-        while pending:
-            mine = set(store.claim([run.key for run in pending], owner))
-            if mine:
-                compute([run for run in pending if run.key in mine])
-            stored = store.done_keys()
-            left = [run for run in pending if run.key not in stored]
-            summary.by_others += len(pending) - len(left) - len(mine & stored)
-            bar.update(len(pending) - len(left) - len(mine & stored))
-            pending = left
-            if not pending:
-                break
-            others = {store.claims().get(run.key, (None, "?", 0))[1:] for run in pending}
-            where = ", ".join(f"pid {pid} on {host}" for host, pid in sorted(others))
-            if not wait_for_others:
-                raise StoreBusy(f"{len(pending)} runs are being computed by another process ({where}) "
-                                f"on {store.path}; run again when it has finished")
-            if not told:
-                bar.write(f"waiting for {len(pending)} runs being computed by another process ({where})")
-                told = True
-            time.sleep(poll)
+        sweep.until_stored(pending, wait_for_others, poll)
     finally:
-        store.release(owner)
+        # Released even when interrupted: another process may then take the runs left.
+        store.release(sweep.owner)
         bar.close()
         summary.seconds = time.perf_counter() - start
     return summary

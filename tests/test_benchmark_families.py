@@ -173,9 +173,9 @@ params = { steps = 10, ensemble = 1, stability_steps = 0 }
 
 
 @pytest.mark.parametrize("instances", [
-    'family = "chain"\nn = [6]\nactuation = 0.5\nrho = 1.05\nhorizon = 15',
-    'family = "swing_grid"\ngrid = [2]\nseeds = 1\nactuation = 0.5\nhorizon = 15',
-    'family = "platoon"\nn = [3]\nhorizon = 15',
+    'family = "chain"\nn = [6]\nactuation = 0.5\nrho = 1.05\nhorizon = 10',
+    'family = "swing_grid"\ngrid = [2]\nseeds = 1\nactuation = 0.5\nhorizon = 10',
+    'family = "platoon"\nn = [3]\nhorizon = 10',
 ])
 def test_every_method_runs_on_each_benchmark_family(tmp_path, instances):
     (tmp_path / "b.toml").write_text(f'name = "b"\n[instances]\n{instances}\n{EVERY_METHOD}')

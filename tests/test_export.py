@@ -15,7 +15,8 @@ from compare import Store, parse_spec, run_experiment  # noqa: E402
 from compare.cli import main  # noqa: E402
 from compare.run.export import MissingExtra, designs_frame  # noqa: E402
 
-# Seconds to run: an exact baseline, a gamma path, a GRNN-Sparse beta path of a few steps.
+# Seconds to run: an exact baseline, a gamma path, a GRNN-Sparse beta path of a few steps (at the shapes
+# test_folder's GRNNs compile, N = 6, T = 10 and the default curve: numba compiles a kernel per shape).
 SPEC = """
 name = "tiny"
 [instances]
@@ -23,7 +24,7 @@ n = [6]
 a_norms = [1.05]
 seeds = 2
 degree = 3
-horizon = 8
+horizon = 10
 [evaluation]
 validation_size = 20
 [[methods]]
@@ -33,7 +34,7 @@ method = "sparse_admm"
 params = { gammas = [1e-3, 1e-2] }
 [[methods]]
 method = "grnn_sparse"
-params = { steps = 3, ensemble = 1, stability_steps = 0, curve_size = 10 }
+params = { steps = 3, ensemble = 1, stability_steps = 0 }
 grid = { beta = [0.1, 1.0] }
 """
 

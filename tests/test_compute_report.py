@@ -7,6 +7,7 @@ import pytest
 
 from compare.report.compute_report import (NOT_MEASURED, ComputeCell, compute_cells, compute_markdown, growth_exponent,
                                     growth_sentences, instances_per_size, plot_compute)
+from compare.report.figures import plt
 from compare.run.records import Records
 
 LINUX = sys.platform.startswith("linux")
@@ -170,6 +171,25 @@ def test_plot_compute_has_design_scoring_and_memory_panels_with_grouped_legend()
     assert any(t.startswith("instantaneous") for t in texts) and "LQR" in texts
     title = fig._suptitle.get_text()
     assert "6 instances at each N" in title and "hollow marker: fewer than 3 runs" in title
+
+
+@pytest.mark.parametrize("methods", [2, 15, 40])
+def test_the_legend_keeps_to_the_fourth_place_of_the_two_by_two_grid(methods):
+    """Three panels and the legend in a 2 x 2 grid (readable at 800 px); a long legend shrinks, it does not spill."""
+    cells = []
+    for k in range(methods):
+        cells += _cells(f"method {k} with a long descriptive label (x)", {n: (k + 1) * 0.01 * n for n in (10, 20, 40, 80)})
+    fig, axes = plot_compute(cells)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    legend = fig.legends[0].get_window_extent(renderer)
+    figure = fig.bbox
+    assert figure.x0 <= legend.x0 and legend.x1 <= figure.x1 and figure.y0 <= legend.y0 and legend.y1 <= figure.y1
+    for ax in axes:
+        assert not legend.overlaps(ax.get_tightbbox(renderer)), ax.get_title()
+    top_right, bottom_left = axes[1].get_position(), axes[2].get_position()
+    assert top_right.y0 > bottom_left.y1 - 1e-9 and top_right.x0 > bottom_left.x1 - 1e-9  # a 2 x 2 grid
+    plt.close(fig)
 
 
 def test_coinciding_lines_both_stay_visible():

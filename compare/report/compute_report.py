@@ -300,11 +300,12 @@ def _draw_series(ax, xs, ys, counts, style, rank: int, label: str, *, annotate: 
     return line
 
 
-def _grouped_legend_entries(labels, styles, names: dict) -> tuple[list, list, int]:
+def _grouped_legend_entries(labels, styles, names: dict, *, one_column: bool = False) -> tuple[list, list, int]:
     """Legend handles and texts in one column per information model, each headed by its line style.
 
     Returns handles, texts and the number of columns; the entries are padded so that
     matplotlib's column-major legend puts each information model in a column of its own.
+    With ``one_column`` the groups follow each other in one column, a blank row between them.
     """
     from matplotlib.lines import Line2D
 
@@ -322,11 +323,12 @@ def _grouped_legend_entries(labels, styles, names: dict) -> tuple[list, list, in
         columns.append(column)
     height = max(len(c) for c in columns)
     handles, texts = [], []
-    for column in columns:
-        column += [(Line2D([], [], linestyle="none"), "")] * (height - len(column))
+    for k, column in enumerate(columns):
+        blanks = (k < len(columns) - 1) if one_column else height - len(column)
+        column += [(Line2D([], [], linestyle="none"), "")] * blanks
         handles += [h for h, _ in column]
         texts += [t for _, t in column]
-    return handles, texts, len(columns)
+    return handles, texts, 1 if one_column else len(columns)
 
 
 def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dict | None = None):
@@ -358,7 +360,11 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
     styles = _resolve_styles(labels, styles)
     own_figure = axes is None
     if own_figure:
-        fig, axes = plt.subplots(1, 3, figsize=(17, 6.4), constrained_layout=True)
+        # Two by two, the legend in the fourth place: in one row of three the page's 800 px
+        # shrank the legend's text to about 5 px.
+        fig, grid = plt.subplots(2, 2, figsize=(11, 9.6), constrained_layout=True)
+        grid[1, 1].axis("off")
+        axes = (grid[0, 0], grid[0, 1], grid[1, 0])
     else:
         fig = axes[0].figure
     design_ax, scoring_ax, memory_ax = axes
@@ -398,12 +404,12 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
         ax.minorticks_off()
         ax.set_xlabel("N (nodes)")
         ax.grid(True, which="major", alpha=0.3)
-    design_ax.set_ylabel("method's own seconds per design (median over runs; 1 core)")
-    design_ax.set_title("Design time per design")
-    scoring_ax.set_ylabel("scoring seconds per design (median over runs)")
-    scoring_ax.set_title("Scoring time per design (cost evaluation, simulation)")
-    memory_ax.set_ylabel("memory added by a run: its peak above its start (MB, median over runs)")
-    memory_ax.set_title("Memory added per run (peak less the worker's baseline)")
+    design_ax.set_ylabel("method's own seconds per design\n(median over runs; 1 core)")
+    design_ax.set_title("Design time per design\n")
+    scoring_ax.set_ylabel("scoring seconds per design\n(median over runs)")
+    scoring_ax.set_title("Scoring time per design\n(cost evaluation, simulation)")
+    memory_ax.set_ylabel("memory added by a run: its peak above\nits start (MB, median over runs)")
+    memory_ax.set_title("Memory added per run\n(peak less the worker's baseline)")
     # Label 1-2-5 steps in plain MB, not one power of ten: megabytes are read as numbers.
     memory_ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
     memory_ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
@@ -415,12 +421,35 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
            if uniform else f"hollow marker: fewer than {FEW_RUNS} runs behind it")
     fig.suptitle("Compute against network size (" + (f"{_instances_text(instances)}; " if instances else "")
                  + f"{few})", fontsize=11)
-    handles, texts, columns = _grouped_legend_entries(labels, styles, names)
-    if own_figure:  # one legend for all panels, below them, so that no entry covers a line
-        fig.legend(handles, texts, loc="outside lower center", ncol=columns, fontsize=8, frameon=False)
+    handles, texts, columns = _grouped_legend_entries(labels, styles, names, one_column=own_figure)
+    if own_figure:  # one legend for all panels, in the fourth place, so that no entry covers a line
+        _legend_in_place(fig, grid[1, 1], handles, texts)
     else:
         design_ax.legend(handles, texts, ncol=columns, fontsize=6)
     return fig, axes
+
+
+def _legend_in_place(fig, place, handles, texts, *, largest: float = 11.0, smallest: float = 4.0) -> None:
+    """A figure legend centred in the empty axes ``place``, in one column or two, at the largest type that fits.
+
+    A legend's extent grows in proportion to its type size, so one layout at ``largest``
+    gives the size at which each column count fits; more methods get smaller type,
+    never a legend that spills over the panels.
+    """
+    fig.draw_without_rendering()  # the constrained layout settles the place first
+    anchor = place.get_position().bounds  # figure fraction, as fig.legend reads bbox_to_anchor
+    best = None
+    for ncol in (1, 2):
+        legend = fig.legend(handles, texts, loc="center", bbox_to_anchor=anchor, ncol=ncol, fontsize=largest,
+                            frameon=False)
+        fig.draw_without_rendering()
+        box, room = legend.get_window_extent(), place.get_window_extent()
+        size = largest * min(1.0, 0.97 * room.width / box.width, 0.97 * room.height / box.height)
+        legend.remove()
+        if best is None or size > best[1] + 1e-9:
+            best = (ncol, size)
+    fig.legend(handles, texts, loc="center", bbox_to_anchor=anchor, ncol=best[0], fontsize=max(smallest, best[1]),
+               frameon=False)
 
 
 def _fmt_mb(value: float) -> str:
@@ -508,26 +537,26 @@ def _instances_text(instances: dict) -> str:
 
 def _caption(instances: dict) -> str:
     return (
-        f"Runs on {_instances_text(instances)}, one single-threaded worker each. Left: the method's own "
+        f"Runs on {_instances_text(instances)}, one single-threaded worker each. Top left: the method's own "
         "seconds per design, log–log: "
         "for each run the sum of its designs' recorded seconds divided by the designs it returned (a γ or β path "
         "returns one per weight; batched learned runs share their batch's time equally), the median over runs. "
-        "Middle: the scoring seconds per design, timed around the harness's scoring of the designs a method "
+        "Top right: the scoring seconds per design, timed around the harness's scoring of the designs a method "
         "returned (codesign.scoring.evaluate), per design and median over runs. A design that comes back already "
         "scored keeps its cost: an exact cost a method computed is in its own seconds, and the learned methods "
         "simulate their designs to the harness's precision inside their call, after their training's timer "
         "stops; they record that simulation's seconds, and this panel adds them to the harness's. The rest of a "
         "run's wall time (building its instance) is in neither panel. A "
         "median of 0 (a method that takes no measurable time, such as doing nothing) cannot be drawn on a "
-        "log axis and is only in the table. Right: the memory a run added, its worker's peak resident memory "
+        "log axis and is only in the table. Bottom left: the memory a run added, its worker's peak resident memory "
         "during the run less the worker's resident memory when the run started (the interpreter, the libraries "
         "loaded so far and what earlier runs kept; memory they freed is handed back to the system first), "
         "median over runs; the runs of one batch share one start and one peak, and a run that is the first in "
         "its worker to load a library counts the library. Only runs with at least one usable design "
         "and none refused by a size guard are timed; a size where none was is absent from the figure (see the "
         f"table). A hollow marker, annotated with its count, rests on fewer than {FEW_RUNS} runs. The legend "
-        "groups methods by information model (its line style heads each column) and gives, where a method has "
-        f"design timings at {MIN_SIZES} or more sizes, the slope k of a least-squares fit of log design time "
+        "(bottom right) groups methods by information model (its line style heads each group) and gives, "
+        f"where a method has design timings at {MIN_SIZES} or more sizes, the slope k of a least-squares fit of log design time "
         f"against log N (time ∝ N^k); with fewer sizes no growth is fitted (\"too few sizes\" in the table), "
         "and the table's last column fits the memory added alike. "
         "Table cells: design seconds per design, scoring seconds per design, MB added, and in parentheses the "

@@ -352,19 +352,20 @@ def grnn_batch(jobs, *, stack_size: int = 128) -> list[Design]:
                           states=min(job.instance.n for job in parsed))
 
 
-def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
-    if job.start is not None:
-        return _finish_warm(job, first, chosen, refined, seconds)
-    method = "grnn" if job.variant == "given" else f"grnn_{job.variant}"
+def _method_name(job: _Job) -> str:
+    return "grnn" if job.variant == "given" else f"grnn_{job.variant}"
+
+
+def _trained(job: _Job, first, chosen, refined) -> tuple:
+    """(result, failure, extras) of a run's training: the chosen member (the sparse variant's refined one),
+    or None and why; the extras every GRNN design records about its training."""
     extras: dict = {
         "variant": job.variant,
         "ensemble_curve_costs": selection_costs(first),
         "diverged_members": sum(r.diverged for r in first),
     }
     if chosen is None:
-        return Design.failure(method, job.params, DIVERGED,
-                              f"all {len(first)} ensemble members diverged (non-finite loss or gradient)",
-                              info_model="delayed", seconds=seconds, extras=extras)
+        return None, f"all {len(first)} ensemble members diverged (non-finite loss or gradient)", extras
     result = first[chosen]
     if job.variant == "sparse":
         extras["l1_curve"] = curve(result)
@@ -372,23 +373,21 @@ def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
         best = best_member(refined) if refined else None
         extras["refine_curve_costs"] = selection_costs(refined)
         if best is None:
-            return Design.failure(method, job.params, DIVERGED, "every refinement run diverged",
-                                  info_model="delayed", seconds=seconds, extras=extras)
+            return None, "every refinement run diverged", extras
         result = refined[best]
-    linear = job.settings.activation == "identity"
-    nodes = {} if job.instance.scalar_nodes else dict(state_nodes=job.instance.state_nodes,
-                                                       input_nodes=job.instance.input_nodes)
-    controller = (LinearGRNNController if linear else GRNNController)(**result.params, **nodes)
-    links, self_loops = count_links(controller.S)
+    return result, None, extras
+
+
+def _finish(job: _Job, first, chosen, refined, seconds) -> Design:
+    if job.start is not None:
+        return _finish_warm(job, first, chosen, refined, seconds)
+    method = _method_name(job)
+    result, failure, extras = _trained(job, first, chosen, refined)
+    if result is None:
+        return Design.failure(method, job.params, DIVERGED, failure, info_model="delayed", seconds=seconds,
+                              extras=extras)
     extras["curve"] = curve(result)
-    extras["spectral_radius"] = spectral_radius(
-        controller.linearized_closed_loop(job.instance, sparse=job.instance.n > STRUCTURED_ABOVE))
-    if linear:
-        return _finish_linear(job, controller, first, links, self_loops, seconds, extras)
-    return simulated_design(job.instance, controller, method=method, params=job.params, info_model="delayed",
-                            links=links, self_loops=self_loops, seconds=seconds, extras=extras,
-                            stability_steps=job.settings.stability_steps,
-                            stability_size=job.settings.stability_size, message=diverged_members_message(first))
+    return _scored(job, method, _controller(job, result.params), seconds, extras, diverged_members_message(first))
 
 
 def _controller(job: _Job, params: dict, *, linear: bool | None = None):
@@ -422,25 +421,9 @@ def _finish_warm(job: _Job, first, chosen, refined, seconds) -> Design:
     the random draw has nothing to keep: the run is an ordinary one, its fallback noted.
     """
     start = job.start
-    method = "grnn" if job.variant == "given" else f"grnn_{job.variant}"
-    extras: dict = {
-        "variant": job.variant,
-        "ensemble_curve_costs": selection_costs(first),
-        "diverged_members": sum(r.diverged for r in first),
-    }
+    method = _method_name(job)
+    result, failure, extras = _trained(job, first, chosen, refined)
     extras.update(start.extras)
-    result, failure = None, None
-    if chosen is None:
-        failure = f"all {len(first)} ensemble members diverged (non-finite loss or gradient)"
-    else:
-        result = first[chosen]
-        if job.variant == "sparse":
-            extras["l1_curve"] = curve(result)
-            extras["l1_links"], extras["l1_self_loops"] = count_links(
-                np.abs(result.params["S"]) >= job.settings.threshold)
-            best = best_member(refined) if refined else None
-            extras["refine_curve_costs"] = selection_costs(refined)
-            result, failure = (None, "every refinement run diverged") if best is None else (refined[best], None)
     notes = [extras["init_note"]] if "init_note" in extras else []
     members = [diverged_members_message(first)] if diverged_members_message(first) else []
     trained = _controller(job, result.params) if result is not None else None
@@ -498,21 +481,6 @@ def _scored(job: _Job, method: str, controller, seconds, extras, message: str) -
     return Design(method=method, params=job.params, controller=controller, cost=cost, links=links,
                   self_loops=self_loops, info_model="delayed", status=OPTIMAL, message=message, seconds=seconds,
                   cost_stderr=0.0, cost_kind="exact", extras=extras)
-
-
-def _finish_linear(job: _Job, controller, first, links, self_loops, seconds, extras) -> Design:
-    """A linear GRNN scored exactly; stable in the long run iff its closed loop's spectral radius is < 1."""
-    method = "grnn" if job.variant == "given" else f"grnn_{job.variant}"
-    cost = exact_cost(job.instance, controller)
-    extras["bounded"] = bool(extras["spectral_radius"] < 1.0)
-    if not np.isfinite(cost):
-        return Design.failure(method, job.params, DIVERGED, "the trained linear GRNN's exact cost is not finite",
-                              info_model="delayed", seconds=seconds, links=links, self_loops=self_loops,
-                              extras=extras)
-    return Design(method=method, params=job.params, controller=controller, cost=cost, links=links,
-                  self_loops=self_loops, info_model="delayed", status=OPTIMAL,
-                  message=diverged_members_message(first), seconds=seconds, cost_stderr=0.0, cost_kind="exact",
-                  extras=extras)
 
 
 @takes_settings(GRNNSettings)

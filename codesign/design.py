@@ -8,6 +8,7 @@ defined, so that ``from codesign.design import STATUSES`` keeps working.
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,6 +27,7 @@ from .status import (
 
 __all__ = [
     "Design",
+    "Timer",
     "STATUSES",
     "INFO_MODELS",
     "count_links",
@@ -34,6 +36,25 @@ __all__ = [
     "vet_solver_cost",
     "INACCURATE_RTOL",
 ]
+
+class Timer:
+    """Wall-clock seconds inside ``with timer:`` blocks, added up, also when a block raises.
+
+    ``with Timer() as t: ...; t.seconds``: how methods measure the seconds a :class:`Design`
+    records, and how the harness measures a run's scoring across its designs.
+    """
+
+    def __init__(self):
+        self.seconds = 0.0
+
+    def __enter__(self):
+        self._start = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc):
+        self.seconds += time.perf_counter() - self._start
+        return False
+
 
 #: How information travels in a design: ``instantaneous`` (links deliver the current
 #: state with no delay, possibly over many hops), ``delayed`` (one step per hop, as

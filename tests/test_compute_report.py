@@ -343,3 +343,17 @@ def test_a_report_folder_from_before_the_measurements_rebuilds_saying_they_were_
         assert "| m | 0.1, ?, ? (2) |" in compute
         assert f"- m: design time grows as N^1.0; memory added was {NOT_MEASURED}." in compute
     assert (tmp_path / "again" / "runs.csv").read_bytes() == (tmp_path / "first" / "runs.csv").read_bytes()
+
+
+def test_one_timer_adds_up_its_blocks_also_when_one_raises():
+    from codesign.design import Timer
+
+    timer = Timer()
+    assert timer.seconds == 0.0
+    with timer:
+        time.sleep(0.01)
+    first = timer.seconds
+    with pytest.raises(RuntimeError), timer:
+        time.sleep(0.01)
+        raise RuntimeError
+    assert first >= 0.01 and timer.seconds >= first + 0.01

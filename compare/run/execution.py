@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from codesign import Design, count_links
+from codesign.design import Timer
 from codesign.scoring import evaluate
 from codesign.status import FAILED
 
@@ -97,22 +98,7 @@ class RunResult(NamedTuple):
     baseline_mb: float | None = None
 
 
-class _Stopwatch:
-    """Seconds spent inside ``with watch:`` blocks, added up (also when a block raises)."""
-
-    def __init__(self):
-        self.seconds = 0.0
-
-    def __enter__(self):
-        self._start = time.perf_counter()
-        return self
-
-    def __exit__(self, *exc):
-        self.seconds += time.perf_counter() - self._start
-        return False
-
-
-def _evaluated(instance, designs, evaluation, watch: _Stopwatch) -> list[Design]:
+def _evaluated(instance, designs, evaluation, watch: Timer) -> list[Design]:
     """The designs scored as the harness scores them; the time the scoring takes goes on ``watch``."""
     with watch:
         return [evaluate(instance, d, validation_size=evaluation.validation_size, noise_std=evaluation.noise_std)
@@ -291,7 +277,7 @@ def execute_run(run: Run) -> RunResult:
     libraries loaded so far), not what earlier runs freed (returned to the system
     first, see :func:`_release_freed_memory`); their difference is what the run added.
     """
-    scoring = _Stopwatch()
+    scoring = Timer()
     with _measured() as m:
         try:
             instance = build_instance(run.instance)
@@ -323,7 +309,7 @@ def execute_task(runs: list[Run], plugins=()) -> list[RunResult]:
         ) from None
     if len(runs) == 1 or method.batch is None:
         return [execute_run(run) for run in runs]
-    scoring = [_Stopwatch() for _ in runs]
+    scoring = [Timer() for _ in runs]
     with _measured() as m:
         try:
             instances = [build_instance(run.instance) for run in runs]

@@ -112,12 +112,14 @@ def test_a_warm_started_grnn_sparse_is_never_worse_than_its_start(small, activat
             assert abs(extras["init_tanh_gap"]) < 1e-2  # ε = 0.1 / the start's state scale: tanh nearly linear
 
 
-def test_init_random_changes_no_bit(small):
+def test_init_random_changes_no_bit():
     """The default, named or not: the same parameters, cost, curve and params (init not recorded)."""
-    inst = small[2]
+    # The method-contract tests' shapes (T = 12, batch 20, curve 10): numba compiles a kernel per shape.
+    inst = paper_instance(2, n=8, degree=3, horizon=12)
+    short = dict(SHORT, batch=20, curve_size=10)
     for variant, extra in (("given", {}), ("sparse", {"beta": 0.2})):
-        omitted = grnn(inst, variant=variant, **extra, **SHORT)
-        named = grnn(inst, variant=variant, init="random", **extra, **SHORT)
+        omitted = grnn(inst, variant=variant, **extra, **short)
+        named = grnn(inst, variant=variant, init="random", **extra, **short)
         assert "init" not in omitted.params and named.params == omitted.params
         untimed = [{k: v for k, v in d.extras.items() if not k.endswith("seconds")} for d in (named, omitted)]
         assert named.cost == omitted.cost and untimed[0] == untimed[1] and named.message == omitted.message

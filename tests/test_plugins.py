@@ -188,15 +188,15 @@ def test_key_order_in_a_spec_does_not_change_keys(tmp_path):
 def test_validation_size_reaches_learned_methods(tmp_path):
     spec = textwrap.dedent('''
         [instances]
-        n = [6]
+        n = [8]
         seeds = 1
         degree = 3
-        horizon = 8
+        horizon = 12
         [evaluation]
         validation_size = 4000
         [[methods]]
         method = "gcnn"
-        params = { steps = 2, ensemble = 1, stability_steps = 0 }
+        params = { steps = 2, ensemble = 1, stability_steps = 0, curve_size = 10 }
     ''')
     from codesign.evaluation import simulate_to_precision
     from compare.run.runner import build_instance

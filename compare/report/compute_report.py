@@ -352,8 +352,6 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
     -------
     fig, axes
     """
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator
-
     from .figures import plt
 
     labels = sorted({c.label for c in cells})
@@ -367,35 +365,54 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
         axes = (grid[0, 0], grid[0, 1], grid[1, 0])
     else:
         fig = axes[0].figure
-    design_ax, scoring_ax, memory_ax = axes
-    sizes = sorted({c.n for c in cells})
     by_label = {lb: sorted((c for c in cells if c.label == lb), key=lambda c: c.n) for lb in labels}
-    names = {}
     # Where every point rests on the same few runs, the title says so once instead of a label at each point.
     run_counts = {c.completed for c in cells if c.completed} | {c.runs for c in cells}
     uniform = len(run_counts) == 1 and min(run_counts) < FEW_RUNS
-    empty = []  # panels of a quantity these runs did not measure
-    for ax, value, count in ((design_ax, "design_seconds", "completed"), (scoring_ax, "scoring_seconds", "completed"),
-                             (memory_ax, "memory_mb", "completed")):
-        if any(c.completed for c in cells) and not any(c.completed and math.isfinite(getattr(c, value))
-                                                       for c in cells):
-            ax.text(0.5, 0.5, NOT_MEASURED, transform=ax.transAxes, ha="center", va="center", fontsize=9,
-                    color="0.35", gid=f"not-measured:{value}")
-            empty.append(ax)
-            continue
-        series = {}
-        for label in labels:
-            # A log axis cannot show 0 (scoring or memory too small to measure): such points are left out.
-            points = [c for c in by_label[label] if math.isfinite(getattr(c, value)) and getattr(c, value) > 0]
-            if points:
-                series[label] = ([c.n for c in points], [getattr(c, value) for c in points],
-                                 [getattr(c, count) for c in points])
-        ranks = _coincidence_ranks({lb: s[:2] for lb, s in series.items()})
-        for label, (xs, ys, counts) in series.items():
-            _draw_series(ax, xs, ys, counts, styles[label], ranks[label], label, annotate=not uniform)
+    empty = [ax for ax, value in zip(axes, ("design_seconds", "scoring_seconds", "memory_mb"))
+             if not _draw_quantity(ax, value, cells, by_label, styles, annotate=not uniform)]
+    _label_compute_axes(axes, sorted({c.n for c in cells}), empty)
+    few = (f"every point rests on {min(run_counts)} run{'s' if min(run_counts) != 1 else ''} (hollow markers)"
+           if uniform else f"hollow marker: fewer than {FEW_RUNS} runs behind it")
+    fig.suptitle("Compute against network size (" + (f"{_instances_text(instances)}; " if instances else "")
+                 + f"{few})", fontsize=11)
+    names = {}
     for label in labels:
         slope = _design_exponent(by_label[label])
         names[label] = label + (f"  (∝ N^{slope:.1f})" if slope is not None else "")
+    handles, texts, columns = _grouped_legend_entries(labels, styles, names, one_column=own_figure)
+    if own_figure:  # one legend for all panels, in the fourth place, so that no entry covers a line
+        _legend_in_place(fig, grid[1, 1], handles, texts)
+    else:
+        axes[0].legend(handles, texts, ncol=columns, fontsize=6)
+    return fig, axes
+
+
+def _draw_quantity(ax, value: str, cells, by_label: dict, styles: dict, *, annotate: bool) -> bool:
+    """One panel: each method's median ``value`` (a :class:`ComputeCell` field) against N; False, and the panel
+    says so, where no completed run measured it (runs stored before it was recorded)."""
+    if any(c.completed for c in cells) and not any(c.completed and math.isfinite(getattr(c, value)) for c in cells):
+        ax.text(0.5, 0.5, NOT_MEASURED, transform=ax.transAxes, ha="center", va="center", fontsize=9,
+                color="0.35", gid=f"not-measured:{value}")
+        return False
+    series = {}
+    for label, mine in by_label.items():
+        # A log axis cannot show 0 (scoring or memory too small to measure): such points are left out.
+        points = [c for c in mine if math.isfinite(getattr(c, value)) and getattr(c, value) > 0]
+        if points:
+            series[label] = ([c.n for c in points], [getattr(c, value) for c in points],
+                             [c.completed for c in points])
+    ranks = _coincidence_ranks({lb: s[:2] for lb, s in series.items()})
+    for label, (xs, ys, counts) in series.items():
+        _draw_series(ax, xs, ys, counts, styles[label], ranks[label], label, annotate=annotate)
+    return True
+
+
+def _label_compute_axes(axes, sizes: list, empty: list) -> None:
+    """Log-log axes with the sizes as ticks, their titles and labels; ``empty`` panels get no values."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator
+
+    design_ax, scoring_ax, memory_ax = axes
     for ax in axes:
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -417,16 +434,6 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
     for ax in empty:  # the sizes' range, as the drawn panels have it, and no values on an axis with none
         ax.set_xlim(sizes[0] / 1.25, sizes[-1] * 1.25)
         ax.yaxis.set_major_locator(NullLocator())
-    few = (f"every point rests on {min(run_counts)} run{'s' if min(run_counts) != 1 else ''} (hollow markers)"
-           if uniform else f"hollow marker: fewer than {FEW_RUNS} runs behind it")
-    fig.suptitle("Compute against network size (" + (f"{_instances_text(instances)}; " if instances else "")
-                 + f"{few})", fontsize=11)
-    handles, texts, columns = _grouped_legend_entries(labels, styles, names, one_column=own_figure)
-    if own_figure:  # one legend for all panels, in the fourth place, so that no entry covers a line
-        _legend_in_place(fig, grid[1, 1], handles, texts)
-    else:
-        design_ax.legend(handles, texts, ncol=columns, fontsize=6)
-    return fig, axes
 
 
 def _legend_in_place(fig, place, handles, texts, *, largest: float = 11.0, smallest: float = 4.0) -> None:

@@ -423,40 +423,15 @@ def plot_decomposition(rows: Sequence[Decomposition], *, axes=None):
     -------
     (Figure, list of Axes)
     """
-    import matplotlib.pyplot as plt
-
     columns = list(dict.fromkeys((d.system, d.activation) for d in rows))
-    if axes is None:  # a row per system, its activations side by side: two panels across read at 800 px
-        systems = list(dict.fromkeys(d.system for d in rows))
-        across = max(sum(1 for c in columns if c[0] == s) for s in systems)
-        fig, grid = plt.subplots(len(systems), across, figsize=(4.2 * across + 0.8, 3.2 * len(systems)),
-                                 sharey=True, squeeze=False)
-        place = {}
-        for i, system in enumerate(systems):
-            for j, column in enumerate(c for c in columns if c[0] == system):
-                place[column] = grid[i][j]
-        for ax in grid.flat:
-            if ax not in place.values():
-                ax.set_visible(False)
-        axes = [place[c] for c in columns]
+    if axes is None:
+        fig, axes = _decomposition_axes(rows, columns)
     else:
         fig = axes[0].figure
-    width = 0.18
     for ax, (system, activation) in zip(axes, columns):
         here = [d for d in rows if d.system == system and d.activation == activation]
         for k, (name, *_) in enumerate(PARTS):
-            xs, ys, lo, hi = [], [], [], []
-            for j, d in enumerate(here):
-                p = d.parts[name]
-                if not p.instances:
-                    continue
-                xs.append(j + (k - 1.5) * width)
-                ys.append(p.median)
-                lo.append(p.median - p.low)
-                hi.append(p.high - p.median)
-            drawn = ax.errorbar(xs, ys, yerr=[lo, hi], fmt=_PART_MARKERS[name], color=_PART_COLOURS[name],
-                                capsize=2, markersize=5, linewidth=1.2, label=name if ax is axes[0] else None)
-            drawn.lines[0].set_gid(f"decomposition:{name}")  # read back by the tests
+            _draw_part(ax, here, name, k, legend=ax is axes[0])
         ax.axhline(0.0, color="0.5", linewidth=0.8)
         ax.set_xticks(range(len(here)), ["any" if d.budget is None else f"≤ {d.budget:g}" for d in here])
         ax.set_xlabel("link budget")
@@ -471,3 +446,40 @@ def plot_decomposition(rows: Sequence[Decomposition], *, axes=None):
     axes[0].legend(fontsize=8, loc="best")
     fig.tight_layout()
     return fig, axes
+
+
+def _decomposition_axes(rows: Sequence[Decomposition], columns: list[tuple]) -> tuple:
+    """A row of panels per system, its activations side by side (two panels across read at 800 px);
+    returns the figure and one Axes per (system, activation) of ``columns``, in that order."""
+    import matplotlib.pyplot as plt
+
+    systems = list(dict.fromkeys(d.system for d in rows))
+    across = max(sum(1 for c in columns if c[0] == s) for s in systems)
+    fig, grid = plt.subplots(len(systems), across, figsize=(4.2 * across + 0.8, 3.2 * len(systems)),
+                             sharey=True, squeeze=False)
+    place = {}
+    for i, system in enumerate(systems):
+        for j, column in enumerate(c for c in columns if c[0] == system):
+            place[column] = grid[i][j]
+    for ax in grid.flat:
+        if ax not in place.values():
+            ax.set_visible(False)
+    return fig, [place[c] for c in columns]
+
+
+def _draw_part(ax, here: list, name: str, k: int, *, legend: bool) -> None:
+    """Part ``name`` (the k-th of PARTS) at each budget of one panel: its paired median and 95 % interval,
+    offset within the budget's group of four."""
+    width = 0.18
+    xs, ys, lo, hi = [], [], [], []
+    for j, d in enumerate(here):
+        p = d.parts[name]
+        if not p.instances:
+            continue
+        xs.append(j + (k - 1.5) * width)
+        ys.append(p.median)
+        lo.append(p.median - p.low)
+        hi.append(p.high - p.median)
+    drawn = ax.errorbar(xs, ys, yerr=[lo, hi], fmt=_PART_MARKERS[name], color=_PART_COLOURS[name],
+                        capsize=2, markersize=5, linewidth=1.2, label=name if legend else None)
+    drawn.lines[0].set_gid(f"decomposition:{name}")  # read back by the tests

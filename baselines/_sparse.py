@@ -18,11 +18,10 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from codesign.controllers import StaticGain
-from codesign.design import Design, count_links
+from codesign.design import Design, Timer, count_links
 from codesign.evaluation import spectral_radius, static_gain_cost, static_gain_cost_and_grad
 from codesign.status import DIVERGED, INACCURATE, OPTIMAL, USABLE
 
-from ._common import Timer
 from .lqr import decentralized
 from .polish import GRAD_RTOL
 from .stabilizing import is_stable, stabilizing_gain, unstable_note

@@ -36,10 +36,9 @@ from typing import Annotated, Literal
 
 import numpy as np
 
-from codesign.design import Design
+from codesign.design import Design, Timer
 from codesign.methods import AtLeast, NotEmpty, method
 
-from ._common import Timer
 from .sparse_budget import INFO_MODELS, admissible_links, check_budgets, gain_model
 
 __all__ = ["best_pattern", "automorphisms"]

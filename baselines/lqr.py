@@ -7,13 +7,12 @@ from typing import Literal
 import numpy as np
 
 from codesign.controllers import StaticGain, ZeroInput
-from codesign.design import Design, count_links
+from codesign.design import Design, Timer, count_links
 from codesign.evaluation import spectral_radius, static_gain_cost
 from codesign.instances import check_instance
 from codesign.methods import method
 from codesign.status import DIVERGED, FAILED, INACCURATE, OPTIMAL
 
-from ._common import Timer
 from .polish import GRAD_RTOL
 from .stabilizing import EXHAUSTIVE_STATES, is_stable, stabilizing_gain, unstable_note
 

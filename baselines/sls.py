@@ -33,14 +33,13 @@ from typing import Annotated
 import numpy as np
 
 from codesign.controllers import register_controller
-from codesign.design import Design, count_links
+from codesign.design import Design, Timer, count_links
 from codesign.evaluation import impulse_responses, response_cost
 from codesign.instances import hop_distances
 from codesign.methods import Above, AtLeast, Matches, NotEmpty, method
 from codesign.status import (FAILED, INACCURATE, INACCURATE_RTOL, INFEASIBLE, OPTIMAL, USABLE, solver_status,
                              vet_solver_cost)
 
-from ._common import Timer
 from .qi import check_speed, is_quadratically_invariant
 
 __all__ = [

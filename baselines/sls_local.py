@@ -32,13 +32,12 @@ from typing import Annotated
 import numpy as np
 
 from codesign.cluster import spread
-from codesign.design import Design, count_links
+from codesign.design import Design, Timer, count_links
 from codesign.evaluation import response_cost
 from codesign.instances import hop_distances
 from codesign.methods import Above, AtLeast, method
 from codesign.status import FAILED, INFEASIBLE, OPTIMAL
 
-from ._common import Timer
 from .sls import GRAPH_NAME, SLSController, checked_length, support_hops, topology
 
 __all__ = ["sls_local", "solve_column"]

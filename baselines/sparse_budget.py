@@ -37,12 +37,11 @@ from typing import Annotated, Literal
 
 import numpy as np
 
-from codesign.design import Design
+from codesign.design import Design, Timer
 from codesign.evaluation import spectral_radius, static_gain_cost_and_grad
 from codesign.methods import AtLeast, NotEmpty, method
 from codesign.status import USABLE
 
-from ._common import Timer
 from ._sparse import DecentralizedCache, as_path_point, gain_design, polished_gain
 from .sparse_admm import MAX_STATES as ADMM_MAX_STATES
 from .sparse_admm import MAX_STATES_REASON as ADMM_MAX_STATES_REASON

@@ -92,12 +92,11 @@ from typing import Annotated
 import numpy as np
 
 from codesign.controllers import register_controller
-from codesign.design import Design, count_links
+from codesign.design import Design, Timer, count_links
 from codesign.evaluation import exact_cost, impulse_responses, spectral_radius
 from codesign.methods import Above, AtLeast, NotEmpty, method
 from codesign.status import DIVERGED, INACCURATE, OPTIMAL, USABLE
 
-from ._common import Timer
 from ._sparse import GRAD_RTOL, DecentralizedCache, check_gammas, pattern_starts
 from .sparse_admm import ADMM_GAMMAS
 from .stabilizing import Minimum, is_stable, local_starts, search, unstable_note

@@ -76,11 +76,10 @@ from typing import Annotated, Literal
 
 import numpy as np
 
-from codesign.design import Design
+from codesign.design import Design, Timer
 from codesign.methods import Above, AtLeast, Below, NotEmpty, method
 from codesign.status import FAILED, INACCURATE, OPTIMAL, USABLE, solver_status
 
-from ._common import Timer
 from ._sparse import DecentralizedCache, check_gammas, design_on_pattern, with_diagonal_end
 
 __all__ = ["sparse_sdp", "SparseSDP", "SDP_GAMMAS", "SDP_MAX_STATES", "SDP_SOLVERS", "default_solver"]

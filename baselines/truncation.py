@@ -13,10 +13,9 @@ from typing import Annotated
 
 import numpy as np
 
-from codesign.design import Design
+from codesign.design import Design, Timer
 from codesign.methods import AtLeast, NotEmpty, method
 
-from ._common import Timer
 from ._sparse import DecentralizedCache, design_on_pattern
 
 __all__ = ["truncated_lqr", "truncation_mask"]

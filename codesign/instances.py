@@ -496,7 +496,7 @@ def haar_orthogonal(dim: int, rng: np.random.Generator) -> np.ndarray:
     The same algorithm (Mezzadri 2007: Q of the QR factorization of a standard normal
     matrix, its columns signed by R's diagonal) on the same stream, so the same matrix
     to the last bit (``tests/test_instances.py``), without importing scipy.stats, which
-    takes about a second in every process that builds an instance
+    added 0.35 s (up to 1.7 s on a busy machine) to the first instance of every process
     (``benchmarks/bench_instance_start.py``).
     """
     q, r = np.linalg.qr(rng.normal(size=(dim, dim)))

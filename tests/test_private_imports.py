@@ -2,7 +2,7 @@
 
 A name with a leading underscore is its module's own business: it may change or go
 without notice, so a module that needs another's helper imports it under a public
-name. Importing a public name from a private module (``from ._common import Timer``)
+name. Importing a public name from a private module (``from ._sparse import DecentralizedCache``)
 is fine; only the imported name counts. Dunder names and ``from __future__`` are not
 private. Read with :mod:`ast`, so strings and comments never count.
 """

@@ -28,7 +28,7 @@ import numpy as np
 from .._lazy import lazy_import
 from ..design import Design, count_links
 from ..evaluation import STRUCTURED_ABOVE, exact_cost, spectral_radius
-from ..instances import hop_distances
+from ..instances import hop_distances, node_width
 from ..methods import Above, AtLeast, method
 from ..status import DIVERGED, OPTIMAL
 from .engines import ENGINES, fused_unsupported, resolve_engine
@@ -176,8 +176,8 @@ def _parse(instance, kwargs: dict) -> _Job:
     settings = GRNNSettings.parse(kwargs, "GRNN")
     check_warm_settings(settings, variant, instance)
     resolve_engine(settings.engine, unsupported=fused_unsupported(  # fails now, not after training
-        states_per_node=slot_index(instance.state_nodes, instance.nodes)[1],
-        inputs_per_node=slot_index(instance.input_nodes, instance.nodes)[1], readout=settings.readout))
+        states_per_node=node_width(instance.state_nodes), inputs_per_node=node_width(instance.input_nodes),
+        readout=settings.readout))
     params = {"variant": variant, "seed": int(seed), **dict(sorted(settings.changed().items()))}
     if beta is not None:
         params["beta"] = float(beta)

@@ -434,6 +434,7 @@ def plot_decomposition(rows: Sequence[Decomposition], *, axes=None):
             _draw_part(ax, here, name, k, legend=ax is axes[0])
         ax.axhline(0.0, color="0.5", linewidth=0.8)
         ax.set_xticks(range(len(here)), ["any" if d.budget is None else f"≤ {d.budget:g}" for d in here])
+        ax.set_xlim(-0.5, len(here) - 0.5)  # every budget's group whole, also where a budget has no part drawn
         ax.set_xlabel("link budget")
         few = min((d.parts["total"] for d in here if d.parts["total"].instances), key=lambda q: q.coverage, default=None)
         cover = f", {few.coverage:.0%} intervals" if few is not None and few.too_few else ""

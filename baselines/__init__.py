@@ -6,6 +6,7 @@ Public names::
     from baselines import sls, sls_topologies, sls_local, is_quadratically_invariant
     from baselines import sparse_admm, sparse_newton, sparse_sdp, truncated_lqr, sparse_delayed
     from baselines import sparse_budget, best_pattern     # exact link budgets, exhaustive search
+    from baselines import refit, refit_design             # the best controller of one class on a given graph
     from baselines import gcnn, gcnn_batch, GCNNController   # the learned baseline, from codesign.learned
 """
 
@@ -22,6 +23,7 @@ from .sparse_sdp import SDP_GAMMAS, SparseSDP, sparse_sdp
 from .truncation import truncated_lqr
 from .sparse_budget import sparse_budget
 from .best_pattern import best_pattern
+from .refit import refit, refit_design
 
 __all__ = [
     "lqr",
@@ -48,6 +50,8 @@ __all__ = [
     "truncated_lqr",
     "sparse_budget",
     "best_pattern",
+    "refit",
+    "refit_design",
     "gcnn",
     "gcnn_batch",
     "GCNNController",

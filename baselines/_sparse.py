@@ -20,7 +20,7 @@ import numpy as np
 from codesign.controllers import StaticGain
 from codesign.design import Design, Timer, count_links
 from codesign.evaluation import spectral_radius, static_gain_cost, static_gain_cost_and_grad
-from codesign.status import DIVERGED, INACCURATE, OPTIMAL, USABLE
+from codesign.status import DIVERGED, FAILED, INACCURATE, OPTIMAL, USABLE
 
 from .lqr import decentralized
 from .polish import GRAD_RTOL
@@ -155,9 +155,10 @@ def gain_design(instance, method: str, params: dict, K, *, seconds: float, extra
     radius = spectral_radius(instance.A + instance.B @ K)
     links, self_loops = count_links(instance.node_support(K))
     extras = {**extras, "spectral_radius": radius}
-    if not is_stable(radius):
+    if not is_stable(radius, instance):
         return Design.failure(method, params, DIVERGED,
-                              f"gain does not stabilize ({unstable_note(radius)}); {message}".rstrip("; "),
+                              f"gain does not stabilize ({unstable_note(radius, instance=instance)}); "
+                              f"{message}".rstrip("; "),
                               info_model="instantaneous", seconds=seconds, links=links,
                               self_loops=self_loops, extras=extras)
     cost = static_gain_cost(instance, K)
@@ -250,14 +251,14 @@ class DecentralizedCache:
 
 
 #: What a weighted ℓ1 solver of :func:`l1_path` returns: its new state, the sparse gain whose
-#: pattern the γ stands for, iteration counts (extras, added over reweighting rounds) and
-#: whether it converged.
+#: pattern the γ stands for, extras (iteration counts, added over reweighting rounds; other values,
+#: the last round's; an optional ``"message"`` for the design) and whether it converged.
 WeightedSolve = Callable[[object, float, np.ndarray], tuple[object, np.ndarray, dict, bool]]
 
 
 def l1_path(instance, method: str, gammas, *, solve: WeightedSolve, start_state, base: dict, reweight: int,
             eps_weight: float, polish: bool, diagonal_end: bool, solver: str, solver_label: str,
-            converged_key: str) -> list:
+            converged_key: str, decentral: "DecentralizedCache | None" = None) -> list:
     """The reweighted ℓ1 path shared by the static-gain solvers (ADMM, proximal Newton).
 
     For each γ (increasing), up to ``reweight`` weighted solves ``solve(state, γ, W)``, after
@@ -266,10 +267,16 @@ def l1_path(instance, method: str, gammas, *, solve: WeightedSolve, start_state,
     of the path is plain ℓ1. Each γ's gain is polished on its pattern and scored; a γ whose gain
     does not give a usable design keeps the previous γ's (``fallback``), and the solver state
     restarts from ``start_state`` when there is none.
+
+    The solver's extras are added over the rounds where they are counts (ints) and are the last
+    round's otherwise; a ``"message"`` among them (why the solve stopped, or how it was answered) goes
+    into the design's message, and where the solver stopped for a stated reason and its gain does not
+    stabilize the γ is ``failed`` with that reason, not ``diverged``. ``decentral`` lets a solver share
+    the path's diagonal gain (computed once).
     """
     N = instance.nodes
     blocks = not instance.scalar_nodes
-    decentral = DecentralizedCache(instance)
+    decentral = DecentralizedCache(instance) if decentral is None else decentral
     state = start_state
     W = np.ones((N, N))
     np.fill_diagonal(W, 0.0)
@@ -281,10 +288,14 @@ def l1_path(instance, method: str, gammas, *, solve: WeightedSolve, start_state,
             counts: dict = {}
             converged = True
             rounds = 0
+            note = ""
             for rounds in range(1, reweight + 1):
                 state, G, its, ok = solve(state, gamma, W)
+                its = dict(its)
+                note = str(its.pop("message", ""))  # the last round's, as its G is the one used
                 for key, value in its.items():
-                    counts[key] = counts.get(key, 0) + value
+                    counted = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+                    counts[key] = counts.get(key, 0) + value if counted else value
                 converged &= ok
                 W_new = 1.0 / ((instance.block_norms(G) if blocks else np.abs(G)) + eps_weight)
                 np.fill_diagonal(W_new, 0.0)
@@ -295,12 +306,17 @@ def l1_path(instance, method: str, gammas, *, solve: WeightedSolve, start_state,
             extras = {"solver": solver, **counts, "reweight_rounds": rounds, converged_key: bool(converged),
                       "fallback": False}
             design = None
-            if is_stable(spectral_radius(instance.A + instance.B @ G)):
+            failure = DIVERGED
+            if is_stable(spectral_radius(instance.A + instance.B @ G), instance):
                 design = design_on_pattern(instance, method, params, G, extras=extras, polish=polish,
                                            decentral=decentral)
+                if note:
+                    design = replace(design, message="; ".join(m for m in (note, design.message) if m))
                 why = design.message
             else:
                 why = f"the sparse gain G found by {solver_label} does not stabilize"
+                if note:  # the solver stopped for a reason it names: that, not the gain, is the failure
+                    failure, why = FAILED, f"{note}; its sparse gain G does not stabilize"
             if design is not None and design.status in USABLE:
                 previous = (design, state, W.copy())
             elif previous is not None:
@@ -310,6 +326,6 @@ def l1_path(instance, method: str, gammas, *, solve: WeightedSolve, start_state,
                                        f"kept the previous gamma's gain: {why}")
             else:
                 state = start_state
-                design = Design.failure(method, params, DIVERGED, why, info_model="instantaneous", extras=extras)
+                design = Design.failure(method, params, failure, why, info_model="instantaneous", extras=extras)
         designs.append(replace(design, seconds=float(timer.seconds)))
     return with_diagonal_end(designs, method, base, decentral) if diagonal_end else designs

@@ -31,8 +31,9 @@ def lqr(instance) -> Design:
         K = np.array(instance.K_lqr)
     links, self_loops = count_links(instance.node_support(K))
     radius = spectral_radius(instance.A + instance.B @ K)
-    if not is_stable(radius):  # the DARE gain stabilizes a stabilizable plant; a numerical one may not
-        return Design.failure("lqr", {}, DIVERGED, f"the LQR gain does not stabilize: {unstable_note(radius)}",
+    if not is_stable(radius, instance):  # the DARE gain stabilizes a stabilizable plant; a numerical one may not
+        return Design.failure("lqr", {}, DIVERGED,
+                              f"the LQR gain does not stabilize: {unstable_note(radius, instance=instance)}",
                               info_model="instantaneous", seconds=timer.seconds, links=links,
                               self_loops=self_loops, extras={"spectral_radius": radius})
     return Design(
@@ -63,7 +64,7 @@ def autonomous(instance) -> Design:
     with np.errstate(over="ignore", invalid="ignore"):
         cost = static_gain_cost(instance, np.zeros((instance.m, instance.n)))
     if not np.isfinite(cost):
-        status = DIVERGED if not is_stable(radius) else FAILED
+        status = DIVERGED if not is_stable(radius, instance) else FAILED
         return Design.failure("autonomous", {}, status,
                               f"the open-loop cost is {cost} (open-loop spectral radius {radius:.6g})",
                               extras=extras)
@@ -114,7 +115,7 @@ def decentralized(instance, *, start: Literal["lqr_diagonal", "zero"] = "lqr_dia
     if not found.stable:
         return Design.failure("decentralized", params, DIVERGED,
                               f"no stabilizing diagonal gain found from {found.tried} starts (the least unstable, "
-                              f"from {found.start}: {unstable_note(found.radius)})",
+                              f"from {found.start}: {unstable_note(found.radius, instance=instance)})",
                               info_model="none", seconds=timer.seconds, extras=extras)
     if not np.isfinite(result.cost):
         return Design.failure("decentralized", params, FAILED, f"optimizer diverged: {result.message}",

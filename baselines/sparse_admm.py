@@ -15,29 +15,37 @@ ADMM splits K = G:
 - K-step: minimize J(K) + (ρ/2)‖K − U‖²_F, U = G − Λ/ρ, by Anderson–Moore
   iterations (freeze P_K and L = A_cl L A_cl' + I, solve the resulting Sylvester
   equation in closed form), each followed by an Armijo line search that never
-  accepts a gain with ρ(A_cl) ≥ 1;
+  accepts a gain with ρ(A_cl) ≥ 1 (and, after a full step, one interpolated
+  shorter step where the full one overshoots);
 - G-step: weighted soft-thresholding of K + Λ/ρ (diagonal never penalized);
 - dual update Λ += ρ(K − G);
+- ρ balanced between the two residuals (Boyd et al. 2011, §3.4.1), never below
+  the given ρ, and raised tenfold on a period-2 cycle or a stall, the solve
+  stopping at once, saying why, when that does not help (issue 60: at a fixed
+  ρ the iterates of a reweighted round can flip between two gains for ever);
 
 then reweighting rounds w_ij = 1/(|G_ij| + ε). Where nodes hold several states or
 inputs, the entries are node blocks K_ij (node i's inputs by node j's states): the
 penalty is γ Σ_{i≠j} w_ij ‖K_ij‖_F, the G-step the weighted group soft-threshold
 K_ij ← K_ij max(0, 1 − t_ij/‖K_ij‖_F), and w_ij = 1/(‖G_ij‖_F + ε). The path is warm-started from LQR;
-a γ whose sparse G destabilizes keeps the previous γ's solution. Each pattern is
+a γ whose sparse G destabilizes keeps the previous γ's solution. A γ at or above
+γ_max, where the diagonal gain meets the ℓ1 optimality conditions
+(:func:`admm_gamma_max`), is answered by the diagonal gain without iterating. Each pattern is
 polished on the exact finite-horizon benchmark cost, which is also what every
 design reports.
 """
 
 from __future__ import annotations
 
-from typing import Annotated
+from collections import deque
+from typing import Annotated, NamedTuple
 
 import numpy as np
 
 from codesign.evaluation import spectral_radius
 from codesign.methods import Above, AtLeast, NotEmpty, method
 
-from ._sparse import DecentralizedCache, check_gammas, infinite_horizon_point, l1_path
+from ._sparse import DecentralizedCache, GainPoint, check_gammas, infinite_horizon_point, l1_path
 from .stabilizing import is_stable, unstable_note
 
 __all__ = ["sparse_admm", "ADMM_GAMMAS", "admm_gamma_max"]
@@ -49,19 +57,60 @@ ADMM_GAMMAS = tuple(float(g) for g in np.geomspace(1e-6, 0.1, 10))
 _ARMIJO = 1e-4        # sufficient-decrease constant of the line search
 _BACKTRACK = 0.5
 _MAX_BACKTRACKS = 40
+#: Anderson–Moore iterations per K-step. Each ends in a stabilizing gain, so a K-step stopped here still
+#: gives a usable iterate; how many stopped short of their tolerance is reported (``kstep_unsolved``). With
+#: the ρ-scaled tolerance and the interpolated step few do (paper seed 0, N = 20, ‖A‖ = 1.05, default path:
+#: 7 of 1,739; issue 60's N = 6 path: 62 of 246), and a cap of 200 that solves them costs 10-25 % more
+#: cost evaluations on the default path for the same designs.
 _KSTEP_MAXITER = 50
+#: Interpolated step lengths tried after an accepted full step. At 0.6 the parabola's minimum lowers the
+#: objective 1.8 times as much as the full step did (at 0.5 the full step gained nothing); above it the
+#: extra evaluation gains too little, and below 0.1 the backtracking's own halving does as well.
+_SHORT_STEP = (0.1, 0.6)
 _REL_TOL = 1e-2        # relative part of the ADMM residual test (lqrsp's eps_rel)
+#: Residual balancing (Boyd et al. 2011, §3.4.1, eq. 3.13): ρ is multiplied by _RHO_STEP when the primal
+#: residual exceeds _RHO_BALANCE times the dual one and divided by it in the opposite case, with each residual
+#: taken as a fraction of its own tolerance (Wohlberg 2017, "ADMM penalty parameter selection by residual
+#: balancing", arXiv:1704.06209): the two are in different units (K against ρK), and the test to meet is
+#: eps_pri against eps_dual. Λ is unscaled here, so a new ρ needs no rescaling of it.
+_RHO_BALANCE = 10.0
+_RHO_STEP = 2.0
+#: ρ never goes below the ``rho`` given (on the paper family a fixed ρ = 100 converges, and lowering it lets
+#: the K-step's objective J + (ρ/2)‖K − U‖² lose its convexity, the source of the cycles below) nor above
+#: _RHO_RANGE times it.
+_RHO_RANGE = 1e6
+#: A period-2 cycle: for _CYCLE_COUNT iterations in a row K_t comes back to K_{t−2} within _CYCLE_RTOL of
+#: the step ‖K_t − K_{t−1}‖, a step larger than the primal tolerance. For K_t = K* + a(−r)^t the ratio is
+#: (1 − r)/r, so this takes in oscillations damped by less than 9 % an iteration, which need 50 or more
+#: iterations to shrink a hundredfold. Issue 60's cycle at ρ = 100 (paper seed 1, N = 6, ‖A‖ = 1.05,
+#: γ = 3, second reweighting round): steps of 1.1, ‖K_t − K_{t−2}‖ falling from 0.08 to 1e-6 over 80
+#: iterations.
+_CYCLE_RTOL = 0.1
+_CYCLE_COUNT = 5
+#: A stall: both residuals unchanged to this relative amount over _STALL_WINDOW iterations. An iteration that
+#: still moves does not keep them equal to 12 digits; a K-step that cannot move (no acceptable step) does.
+_STALL_RTOL = 1e-12
+_STALL_WINDOW = 20
+#: A cycle or stall multiplies ρ by _RESCUE_STEP, and balancing may not bring ρ back below twice the value
+#: that cycled: a larger ρ makes the K-step's objective convex where J's curvature is negative. The next
+#: cycle or stall after _MAX_RESCUES of them stops the weighted solve at once, its message saying why.
+_RESCUE_STEP = 10.0
+_MAX_RESCUES = 3
 
 
 def _kstep(instance, point, U, rho, *, tol, maxiter):
-    """Minimize trace(P_K) + (rho/2)||K - U||² from a stabilizing point. Returns (point, iterations)."""
+    """Minimize trace(P_K) + (rho/2)||K - U||² from a stabilizing point. Returns (point, iterations, solved).
+
+    ``solved`` is False where the gradient norm is still above ``tol``: the iteration cap or a line search
+    that found no acceptable step.
+    """
     A, B, R = instance.A, instance.B, instance.R
     phi = point.J + 0.5 * rho * np.sum((point.K - U) ** 2)
     for it in range(maxiter):
         K, P, L = point.K, point.P, point.L
         grad = point.grad + rho * (K - U)
         if np.linalg.norm(grad) <= tol:
-            return point, it
+            return point, it, True
         # Anderson–Moore: with P and L frozen the stationarity condition is the
         # Sylvester equation 2 M Kbar L + rho Kbar = -2 B'PA L + rho U, M = R + B'PB,
         # solved exactly in the eigenbases of the two symmetric factors.
@@ -83,9 +132,22 @@ def _kstep(instance, point, U, rho, *, tol, maxiter):
                     break
             step *= _BACKTRACK
         else:
-            return point, it + 1  # no acceptable step along this direction
+            return point, it + 1, False  # no acceptable step along this direction
+        if step == 1.0:
+            # The Anderson–Moore step overshoots where J bends away from its frozen-P model (near the
+            # stability boundary it alternates about the minimum, each full step barely lowering φ):
+            # the minimizer of the parabola through φ(0), φ'(0) and φ(1) then lies well short of 1,
+            # and one more evaluation there is taken when it is lower.
+            curvature = phi_trial - phi - slope
+            short = -slope / (2.0 * curvature) if curvature > 0 else 1.0
+            if _SHORT_STEP[0] <= short <= _SHORT_STEP[1]:
+                better = infinite_horizon_point(instance, K + short * direction)
+                if better is not None:
+                    phi_better = better.J + 0.5 * rho * np.sum((better.K - U) ** 2)
+                    if phi_better < phi_trial:
+                        trial, phi_trial = better, phi_better
         point, phi = trial, phi_trial
-    return point, maxiter
+    return point, maxiter, np.linalg.norm(point.grad + rho * (point.K - U)) <= tol
 
 
 def _shrink(V, threshold):
@@ -101,6 +163,67 @@ def _group_shrink(instance, V, threshold):
     return V * instance.expand_blocks(factor)
 
 
+class _DiagonalEnd:
+    """The decentralized gain as a point of the ADMM objective, and the γ above which it solves the ℓ1 problem.
+
+    The ℓ1 optimality condition at a diagonal K_d (the diagonal is never penalized) is
+    |∂J/∂K_ij| <= scale γ w_ij for every off-diagonal (i, j) (node blocks: ‖∂J/∂K_IJ‖_F <= scale γ w_IJ),
+    so K_d (with G = K_d, Λ = -∇J) is a fixed point of the ADMM from that γ on:
+    γ_max(W) = max_{i≠j} |∂J/∂K_ij| / (scale w_ij). K_d is :func:`baselines.decentralized`'s gain
+    (optimal over diagonal gains for the benchmark's finite-horizon cost, a close stand-in for the
+    infinite-horizon J the ADMM minimizes), which is also the design the path reports for a diagonal
+    pattern. Computed once per path, from the path's own :class:`DecentralizedCache`.
+    """
+
+    def __init__(self, instance, decentral: DecentralizedCache):
+        self.instance = instance
+        self.decentral = decentral
+        self._done = False
+        self.point = None
+        self.off = None  # (N, N) off-diagonal gradient magnitudes (entries or node blocks), zero diagonal
+
+    def get(self):
+        """``self`` once the diagonal point is known, or None where the instance has no stabilizing diagonal gain."""
+        if not self._done:
+            self._done = True
+            diagonal = self.decentral.usable()
+            point = None if diagonal is None else infinite_horizon_point(self.instance,
+                                                                          np.array(diagonal.controller.K))
+            if point is not None:
+                grad = point.grad
+                off = np.abs(grad) if self.instance.scalar_nodes else self.instance.block_norms(grad)
+                off = off.copy()
+                np.fill_diagonal(off, 0.0)
+                self.point, self.off = point, off
+        return None if self.point is None else self
+
+    def answers(self, gamma, W, G) -> str:
+        """Why the diagonal gain is this weighted solve's answer, or "" where the ADMM has to run.
+
+        It is when K_d meets this round's ℓ1 conditions (γ >= γ_max(W)) and either γ >= γ_max of plain
+        ℓ1 (where the ℓ1 solution is the diagonal pattern) or, with reweighting, the warm start G is
+        diagonal already. The problem is not convex: from a warm start with links, the ADMM can end at
+        a lower local minimum that keeps some of them (paper seed 0, N = 20, ‖A‖ = 1.05, γ = 0.1: one
+        link, cost 1.397 against the diagonal's 1.558), so that case is left to the ADMM.
+        """
+        top, plain_top = self.gamma_max(W), self.gamma_max(np.where(W > 0, 1.0, 0.0))
+        if gamma < top:
+            return ""
+        if gamma >= plain_top:
+            return (f"gamma {gamma:.4g} >= gamma_max {plain_top:.4g}: the diagonal gain meets the l1 optimality "
+                    "conditions (|dJ/dK_ij| <= gamma w_ij trace(P) off the diagonal), returned without iterating")
+        if not np.any(G[~self.instance.block_mask()]):
+            return (f"gamma {gamma:.4g} >= {top:.4g}, where the diagonal gain meets this round's reweighted l1 "
+                    "optimality conditions, from a diagonal warm start: returned without iterating")
+        return ""
+
+    def gamma_max(self, W) -> float:
+        """Smallest γ (normalized units) at which the diagonal gain meets the weighted ℓ1 conditions."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(self.off > 0, self.off / W, 0.0)
+        return float(np.max(ratio)) / self.instance.trace_P
+
+
 def admm_gamma_max(instance) -> float:
     """Smallest γ (normalized units) at which the best diagonal gain is stationary for plain ℓ1.
 
@@ -108,19 +231,20 @@ def admm_gamma_max(instance) -> float:
     J(K)/trace(P) + γ Σ_{i≠j} |K_ij| holds exactly when
     γ ≥ max_{i≠j} |∇J(K_d)_ij| / trace(P). K_d is the decentralized gain of the
     benchmark (finite-horizon) cost, a close stand-in for the infinite-horizon one.
-    Reweighting makes paths diagonal well below this value.
+    Reweighting makes paths diagonal well below this value. :func:`sparse_admm`
+    answers every γ at or above it with the diagonal gain, without iterating.
+
+    Raises
+    ------
+    ValueError
+        The instance has no stabilizing diagonal gain.
     """
-    diagonal = DecentralizedCache(instance).usable()
-    point = None if diagonal is None else infinite_horizon_point(instance, np.array(diagonal.controller.K))
-    if point is None:
+    found = _DiagonalEnd(instance, DecentralizedCache(instance)).get()
+    if found is None:
         raise ValueError("no stabilizing diagonal gain on this instance")
-    if instance.scalar_nodes:
-        grad = point.grad.copy()
-        np.fill_diagonal(grad, 0.0)
-        return float(np.max(np.abs(grad))) / instance.trace_P
-    norms = instance.block_norms(point.grad)
-    np.fill_diagonal(norms, 0.0)
-    return float(np.max(norms)) / instance.trace_P
+    W = np.ones((instance.nodes, instance.nodes))
+    np.fill_diagonal(W, 0.0)
+    return found.gamma_max(W)
 
 
 #: Past this many states the ADMM path is refused at once through the registry: its iterations
@@ -162,7 +286,11 @@ def sparse_admm(
         The weights carry over to the next γ, as in lqrsp; the first solve of the
         path is plain ℓ1.
     rho : float
-        ADMM penalty.
+        Initial ADMM penalty, in units of trace(P_K) (lqrsp's 100). ρ is then balanced
+        (Boyd et al. 2011, §3.4.1: doubled while the primal residual is over 10 times
+        the dual one, halved in the opposite case, each relative to its tolerance),
+        never below this value, and raised tenfold when the iterates cycle or stall;
+        it carries over from γ to γ.
     polish : bool
         Re-optimize the free entries of each pattern on the exact benchmark cost.
     eps_weight : float
@@ -171,7 +299,8 @@ def sparse_admm(
         Absolute ADMM tolerance per entry: stop when ‖K − G‖_F and ρ‖G − G_prev‖_F
         fall below ``n * tol`` plus 1e-2 times ‖K‖_F (resp. ‖Λ‖_F), lqrsp's test.
     kstep_tol : float
-        The K-step stops when the gradient of its objective has norm below this.
+        The K-step stops when the gradient of its objective has norm below this
+        times ρ / ``rho`` (the same accuracy in K as ρ grows).
     maxiter : int
         ADMM iterations per weighted solve.
     start : array_like, shape (n, n), optional
@@ -187,8 +316,14 @@ def sparse_admm(
         the γ = inf end, each with its own links and exact finite-horizon cost,
         information model ``instantaneous``. Patterns with no off-diagonal entry
         are the decentralized gain. Extras record the ADMM and K-step iterations,
-        reweighting rounds, convergence, the polishing, the spectral radius and
-        whether the previous γ's gain was kept (``fallback``).
+        the K-steps that stopped above their tolerance (``kstep_unsolved``: their
+        iteration cap or no acceptable step), the ρ changes and the last ρ
+        (``rho_changes``, ``rho_final``), ``gamma_max`` (plain ℓ1) and
+        ``gamma_max_weighted`` (the last round's weights), reweighting rounds,
+        convergence, the polishing, the spectral radius and whether the previous
+        γ's gain was kept (``fallback``). A γ answered by the diagonal gain without
+        iterating, or a solve that stopped without converging, says so in its
+        message.
 
     Raises
     ------
@@ -204,6 +339,15 @@ def sparse_admm(
     within 1e-4) at every link count on 57 of 60 instances; the three misses are
     single points, by 1.5e-4 to 5.7e-3 in cost. Plain ℓ1 (``reweight=1``) also misses
     on 3 of 60 (other instances), by 1.4e-4 to 3.7e-3.
+
+    A weighted solve is answered by the diagonal gain K_d without iterating where K_d
+    meets its ℓ1 optimality conditions, |∂J/∂K_ij| <= γ w_ij trace(P) off the diagonal,
+    and either γ >= :func:`admm_gamma_max` (plain ℓ1) or the warm start is diagonal
+    already; it then costs what :func:`baselines.decentralized` costs, once per path.
+    Otherwise the ADMM runs until lqrsp's residual test holds, a cycle or stall
+    persists after three tenfold raises of ρ, or ``maxiter``; a solve that stops
+    without converging says why in the design's message, and where its G does not
+    stabilize the γ is ``failed`` (the path then keeps the previous γ's gain).
     """
     n, m = instance.n, instance.m
     blocks = not instance.scalar_nodes
@@ -226,31 +370,76 @@ def sparse_admm(
 
     base = {"reweight": int(reweight), "rho": float(rho)}
     scale = instance.trace_P  # the ADMM itself runs on trace(P_K), as in lqrsp
+    decentral = DecentralizedCache(instance)  # shared with the path: the diagonal gain is computed once
+    diagonal = _DiagonalEnd(instance, decentral)
+    plain = np.ones((instance.nodes, instance.nodes))
+    np.fill_diagonal(plain, 0.0)
 
     def solve(state, gamma, W):
-        point, G, Lam, its, kits, ok = _admm(instance, *state, scale * gamma * W / rho, rho, tol=tol,
-                                             kstep_tol=kstep_tol, maxiter=maxiter, blocks=blocks)
-        return (point, G, Lam), G, {"admm_iterations": its, "kstep_iterations": kits}, ok
+        point, G, Lam, rho_now = state
+        found = diagonal.get()
+        counts = {}
+        if found is not None:
+            counts = {"gamma_max": found.gamma_max(plain), "gamma_max_weighted": found.gamma_max(W)}
+            note = found.answers(gamma, W, G)
+            if note:
+                # K = G = K_d, Λ = -∇J is the ADMM's fixed point: there is nothing to iterate.
+                start = found.point
+                counts.update(admm_iterations=0, kstep_iterations=0, kstep_unsolved=0, rho_changes=0,
+                              rho_final=rho_now, message=note)
+                return (start, start.K.copy(), -start.grad, rho_now), start.K.copy(), counts, True
+        run = _admm(instance, point, G, Lam, scale * gamma * W, rho_now, rho0=float(rho), tol=tol,
+                    kstep_tol=kstep_tol, maxiter=maxiter, blocks=blocks)
+        counts.update(admm_iterations=run.iterations, kstep_iterations=run.kstep_iterations,
+                      kstep_unsolved=run.kstep_unsolved, rho_changes=run.rho_changes, rho_final=run.rho)
+        if run.message:
+            counts["message"] = run.message
+        return (run.point, run.G, run.Lam, run.rho), run.G, counts, run.converged
 
-    return l1_path(instance, "sparse_admm", gammas, solve=solve, start_state=(start_point, K.copy(), np.zeros((m, n))),
-                   base=base, reweight=reweight, eps_weight=eps_weight, polish=polish, diagonal_end=diagonal_end,
-                   solver="admm", solver_label="ADMM", converged_key="admm_converged")
+    return l1_path(instance, "sparse_admm", gammas, solve=solve,
+                   start_state=(start_point, K.copy(), np.zeros((m, n)), float(rho)), base=base, reweight=reweight,
+                   eps_weight=eps_weight, polish=polish, diagonal_end=diagonal_end, solver="admm",
+                   solver_label="ADMM", converged_key="admm_converged", decentral=decentral)
 
 
-def _admm(instance, point, G, Lam, threshold, rho, *, tol, kstep_tol, maxiter, blocks=False):
-    """ADMM on K = G from a warm start; returns (point, G, Lam, iterations, K-step iterations, converged).
+class _Run(NamedTuple):
+    """What one weighted ADMM solve ends with."""
+    point: GainPoint
+    G: np.ndarray
+    Lam: np.ndarray
+    rho: float
+    iterations: int
+    kstep_iterations: int
+    kstep_unsolved: int   # K-steps that ended above kstep_tol (iteration cap or no acceptable step)
+    rho_changes: int
+    converged: bool
+    message: str          # why it stopped without converging ("" when it converged)
 
-    Stops on lqrsp's primal/dual residual test with absolute tolerance ``tol``
-    (per entry) and relative tolerance 1e-2.
+
+def _admm(instance, point, G, Lam, penalty, rho, *, rho0, tol, kstep_tol, maxiter, blocks=False) -> _Run:
+    """ADMM on K = G from a warm start, ρ balanced, cycles and stalls acted on.
+
+    ``penalty`` is the ℓ1 weight in the units of J (scale γ W): the G-step's threshold is penalty / ρ,
+    recomputed whenever ρ changes. Λ is the unscaled dual variable, so a new ρ needs no rescaling of it
+    (Boyd et al. 2011, §3.4.1, rescale the scaled one, u = Λ/ρ). Stops on lqrsp's primal/dual residual test
+    with absolute tolerance ``tol`` (per entry) and relative tolerance :data:`_REL_TOL`.
     """
     size = np.sqrt(G.size)
-    kstep_iters = 0
+    floor, ceiling = rho0, rho0 * _RHO_RANGE
+    kstep_iters = unsolved = changes = rescues = flips = 0
+    previous = []  # K_{t-1}, K_{t-2}
+    history = deque(maxlen=_STALL_WINDOW)  # (primal, dual)
+    primal = dual = eps_pri = eps_dual = np.nan
     for it in range(1, maxiter + 1):
-        point, its = _kstep(instance, point, G - Lam / rho, rho, tol=kstep_tol, maxiter=_KSTEP_MAXITER)
+        # The gradient tolerance grows with ρ: the K-step's objective is ρ-strongly convex where ρ outweighs
+        # J's curvature, so ‖gradient‖/ρ bounds its error in K, kept at what it is at the given ρ.
+        point, its, solved = _kstep(instance, point, G - Lam / rho, rho, tol=kstep_tol * rho / rho0,
+                                    maxiter=_KSTEP_MAXITER)
         kstep_iters += its
+        unsolved += not solved
         K = point.K
         V = K + Lam / rho
-        G_new = _group_shrink(instance, V, threshold) if blocks else _shrink(V, threshold)
+        G_new = _group_shrink(instance, V, penalty / rho) if blocks else _shrink(V, penalty / rho)
         dual = rho * np.linalg.norm(G_new - G)
         G = G_new
         primal = np.linalg.norm(K - G)
@@ -258,7 +447,42 @@ def _admm(instance, point, G, Lam, threshold, rho, *, tol, kstep_tol, maxiter, b
         eps_pri = size * tol + _REL_TOL * max(np.linalg.norm(K), np.linalg.norm(G))
         eps_dual = size * tol + _REL_TOL * np.linalg.norm(Lam)
         if primal < eps_pri and dual < eps_dual:
-            return point, G, Lam, it, kstep_iters, True
-    return point, G, Lam, maxiter, kstep_iters, False
-
-
+            return _Run(point, G, Lam, rho, it, kstep_iters, unsolved, changes, True, "")
+        trouble = ""
+        if len(previous) == 2:
+            step = np.linalg.norm(K - previous[0])
+            back = np.linalg.norm(K - previous[1])
+            flips = flips + 1 if step > eps_pri and back <= _CYCLE_RTOL * step else 0
+            if flips >= _CYCLE_COUNT:
+                trouble = (f"a period-2 cycle (|K_t - K_t-2| = {back:.2g} while |K_t - K_t-1| = {step:.2g}, "
+                           f"primal residual {primal:.3g}, dual {dual:.3g})")
+        history.append((primal, dual))
+        if not trouble and len(history) == _STALL_WINDOW and all(
+                abs(p - primal) <= _STALL_RTOL * primal and abs(d - dual) <= _STALL_RTOL * dual for p, d in history):
+            trouble = (f"a stall (primal residual {primal:.3g} and dual {dual:.3g} unchanged to 1e-12 over "
+                       f"{_STALL_WINDOW} iterations)")
+        if trouble:
+            if rescues == _MAX_RESCUES or rho * _RESCUE_STEP > ceiling:
+                return _Run(point, G, Lam, rho, it, kstep_iters, unsolved, changes, False,
+                            f"ADMM stopped at iteration {it} on {trouble}, after raising rho {rescues} times "
+                            f"(now {rho:.3g})")
+            rescues += 1
+            changes += 1
+            floor = rho * _RHO_STEP  # balancing may lower ρ again, but not back to where it cycled
+            rho *= _RESCUE_STEP
+            flips = 0
+            previous.clear()
+            history.clear()
+            continue
+        previous = [K, *previous[:1]]
+        # Residual balancing, each residual as a fraction of its tolerance.
+        ratio = (primal / eps_pri) / (dual / eps_dual) if dual > 0 else np.inf
+        if ratio > _RHO_BALANCE and rho * _RHO_STEP <= ceiling:
+            rho *= _RHO_STEP
+            changes += 1
+        elif ratio < 1.0 / _RHO_BALANCE and rho / _RHO_STEP >= floor:
+            rho /= _RHO_STEP
+            changes += 1
+    return _Run(point, G, Lam, rho, maxiter, kstep_iters, unsolved, changes, False,
+                f"ADMM stopped at its iteration limit ({maxiter}) with primal residual {primal:.3g} "
+                f"(tolerance {eps_pri:.3g}) and dual {dual:.3g} (tolerance {eps_dual:.3g}), rho {rho:.3g}")

@@ -120,7 +120,7 @@ class _Instantaneous:
         """Polish on ``links`` (and the own blocks): the stabilizing search from ``K``, then its fallbacks."""
         gain, extras = polished_gain(self.instance, K, self.entries(links), decentral=self.decentral)
         cost, grad = static_gain_cost_and_grad(self.instance, gain)
-        stable = is_stable(spectral_radius(self.instance.A + self.instance.B @ gain))
+        stable = is_stable(spectral_radius(self.instance.A + self.instance.B @ gain), self.instance)
         return gain, cost, stable, self.instance.block_norms(grad), extras
 
     def design(self, K, params, extras):

@@ -86,6 +86,7 @@ cut the path from 140 s to about 32 s (single thread, shared machine).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, replace
 from typing import Annotated
 
@@ -756,13 +757,16 @@ def _weighted_group_l1(instance, K_local, K_delayed, threshold, *, tol, maxiter)
 
 
 def stabilizing_delayed(instance, K_local, K_delayed, free, *, decentral: DecentralizedCache | None = None,
-                        maxiter: int = 2000) -> Minimum:
+                        maxiter: int = 2000, starts=(), exhaustive: bool = False) -> Minimum:
     """:func:`polish_delayed` on ``free`` from the given gain, then from the stabilizing search's starts.
 
     The shared search of :mod:`baselines.stabilizing` on the delayed gain: where the
     minimum from ``(K_local, K_delayed)`` does not stabilize the augmented closed loop,
-    it goes on from the decentralized gain (``decentral``) and the search's own local
-    starts, all with no link (``K_delayed = 0``), until one does.
+    it goes on from ``starts`` (named ``(K_local, K_delayed)`` pairs of the caller's,
+    such as :func:`baselines.refit`'s), the decentralized gain (``decentral``) and the
+    search's own local starts, all but the caller's with no link (``K_delayed = 0``),
+    until one does; with ``exhaustive`` it polishes every start and keeps the lowest-cost
+    stabilizing minimum (:func:`baselines.stabilizing.search`).
 
     Returns
     -------
@@ -781,14 +785,28 @@ def stabilizing_delayed(instance, K_local, K_delayed, free, *, decentral: Decent
         radius = spectral_radius(delayed_closed_loop(instance, local, result.K_delayed)) if finite else np.inf
         return (local, result.K_delayed), result.cost, radius, result
 
-    def starts():
+    def callers():
         yield "given", (nodes.local_matrix(nodes.local(K_local)), np.where(free, K_delayed, 0.0))
+        for name, (local, delayed) in starts:
+            yield name, (nodes.local_matrix(nodes.local(local)), np.where(free, delayed, 0.0))
         for name, K in pattern_starts(decentral):
             yield name, (nodes.local_matrix(nodes.local(K)), zero)
+
+    def local():
         for name, K in local_starts(instance):
             yield name, (nodes.local_matrix(nodes.local(K)), zero)
 
-    return search(polish, starts(), exhaustive=False)
+    if not exhaustive:
+        return search(polish, itertools.chain(callers(), local()), exhaustive=False)
+    # Every caller's start and the diagonal gain polished, the lowest stabilizing minimum kept; the local
+    # starts (random among them) only where none of those stabilizes, as in the first-stabilizing search.
+    found = search(polish, callers(), exhaustive=True)
+    if found is not None and found.stable:
+        return found
+    more = search(polish, local(), exhaustive=False)
+    tried = (found.tried if found is not None else 0) + (more.tried if more is not None else 0)
+    kept = more if found is None or (more is not None and (more.stable or more.radius < found.radius)) else found
+    return kept._replace(tried=tried)
 
 
 # -- from a gain to a design ---------------------------------------------------------
@@ -818,8 +836,8 @@ def delayed_gain_design(instance, params: dict, local, K_delayed, *, extras: dic
     radius = spectral_radius(delayed_closed_loop(instance, K_local, K_delayed))
     links, self_loops = count_links(nodes.support(K_local, K_delayed))
     extras = {**extras, "spectral_radius": radius}
-    if not is_stable(radius):
-        note = f"the delayed gain does not stabilize ({unstable_note(radius, 'the augmented closed loop')})"
+    if not is_stable(radius, instance):
+        note = f"the delayed gain does not stabilize ({unstable_note(radius, 'the augmented closed loop', instance)})"
         return Design.failure(METHOD, params, DIVERGED, f"{note}; {message}" if message else note,
                               info_model=INFO_MODEL, seconds=seconds, links=links, self_loops=self_loops,
                               extras=extras)

@@ -370,8 +370,8 @@ def sparse_newton(
         raise ValueError(f"start must be a finite ({m}, {n}) gain, got shape {K.shape}")
     evaluated = infinite_horizon_point(instance, K)
     radius = spectral_radius(instance.A + instance.B @ K)
-    if evaluated is None or not is_stable(radius):
-        raise ValueError(f"start gain does not stabilize the instance ({unstable_note(radius)}); "
+    if evaluated is None or not is_stable(radius, instance):
+        raise ValueError(f"start gain does not stabilize the instance ({unstable_note(radius, instance=instance)}); "
                          "the path needs a stabilizing start")
 
     def solve(point, gamma, W):

@@ -219,6 +219,12 @@ class Method:
         limit for some settings or instances only (GRNN-Sparse's l1 stage on
         every pair of nodes, but not on a few hops; node blocks, whose products
         stay dense), enforced like ``max_states``.
+    check : callable, optional
+        ``check(params) -> None``: raises ValueError for hyperparameters that are each
+        valid but not together (a setting that needs another's value, such as the
+        GRNN's warm start and its per-node readout), given one run's hyperparameters
+        (those left out take their defaults). :meth:`check_together` runs it: a spec is
+        refused when it is loaded, for every grid point, and a call before any work.
     """
 
     name: str
@@ -235,6 +241,7 @@ class Method:
     max_states: int | None = None
     max_states_reason: str = ""
     size_limit: Callable | None = None
+    check: Callable | None = None
 
     def __post_init__(self):
         unknown = set(self.produces) - set(PRODUCTS)
@@ -264,6 +271,7 @@ class Method:
         max_states: int | None = None,
         max_states_reason: str = "",
         size_limit: Callable | None = None,
+        check: Callable | None = None,
     ) -> "Method":
         """A method from a function's keyword-only parameters.
 
@@ -292,6 +300,7 @@ class Method:
             max_states=max_states,
             max_states_reason=max_states_reason,
             size_limit=size_limit,
+            check=check,
         )
 
     def check_params(self, params: dict, where: str = "params") -> None:
@@ -302,6 +311,19 @@ class Method:
                 known = ", ".join(accepted) or "none"
                 raise ValueError(f"{where}.{key}: unknown hyperparameter for method {self.name!r} (accepts: {known})")
             accepted[key].check(value, f"{where}.{key}")
+
+    def check_together(self, params: dict, where: str = "params") -> None:
+        """Raise ValueError, prefixed by ``where``, for one run's hyperparameters that are each valid but not together.
+
+        The method's own ``check`` (see :class:`Method`), on the hyperparameters of one run
+        (a spec entry's ``params`` with one grid point); nothing for a method without one.
+        """
+        if self.check is None:
+            return
+        try:
+            self.check(dict(params))
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
 
     def _stamp(self, result, params: dict) -> list[Design]:
         designs = list(result) if isinstance(result, (list, tuple)) else [result]
@@ -336,6 +358,7 @@ class Method:
         """Designs for one instance (always a list), with the name stamped in."""
         check_instance(instance, f"method {self.name!r}")
         self.check_params(params)
+        self.check_together(params)
         refused = self.unsupported(instance, params)
         if refused is not None:
             return refused
@@ -350,6 +373,7 @@ class Method:
             return [self(instance, **params) for instance, params in pairs]
         for _, params in pairs:
             self.check_params(params)
+            self.check_together(params)
         results = self.batch(pairs)
         if len(results) != len(pairs):
             raise RuntimeError(f"{self.name}: batch returned {len(results)} results for {len(pairs)} runs")
@@ -574,6 +598,7 @@ def method(
     max_states: int | None = None,
     max_states_reason: str = "",
     size_limit: Callable | None = None,
+    check: Callable | None = None,
 ):
     """Decorator: register ``f(instance, *, ...)`` as a design method and return it unchanged.
 
@@ -588,7 +613,7 @@ def method(
     bind, exclude
         Keywords fixed to a value (``bind``) or hidden (``exclude``); neither is a
         hyperparameter. Lets one function serve several methods.
-    batch, batch_size, produces, path_param, node_blocks, max_states, max_states_reason, size_limit
+    batch, batch_size, produces, path_param, node_blocks, max_states, max_states_reason, size_limit, check
         See :class:`Method`.
     """
 
@@ -597,7 +622,7 @@ def method(
                                       batch=batch, batch_size=batch_size, produces=produces,
                                       path_param=path_param, node_blocks=node_blocks,
                                       max_states=max_states, max_states_reason=max_states_reason,
-                                      size_limit=size_limit))
+                                      size_limit=size_limit, check=check))
         return func
 
     return decorate

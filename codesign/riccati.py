@@ -22,7 +22,11 @@ triangular solves and matrix products:
   most 1e-8 times the largest: a rank-revealing test, run only then), Newton-Kleinman
   from the stabilizing gain of ``Q + cI`` finds the stabilizing solution. The error
   then means that none exists: (A, B) is not stabilizable, or a mode that Q does not
-  see lies on the unit circle (with a singular Q, within about 1e-6 of it).
+  see lies on the unit circle (with a singular Q, within about 1e-6 of it). The doubling
+  inverts R (``G = B R^{-1} B'``): where R is nearly singular at the problem's scale and
+  that path fails, scipy's QZ solver, which keeps R in its pencil, gives the candidate,
+  accepted only once refined and certified like ours (it then costs the QZ's minutes at
+  n = 1000, paid only by such problems).
 - :func:`solve_discrete_lyapunov`: ``X = A X A' + Q`` (or ``X = A'XA + Q`` with
   ``transpose=True``) by Smith's squared iteration (6 n^3 flops a doubling), whose
   convergence also certifies that A is stable. The rule: Smith first (about 2.6
@@ -75,7 +79,10 @@ _MAX_NEWTON = 50         # Newton-Kleinman steps from a stabilizing gain (semide
 _DEFINITE_RTOL = 1e-8    # Q is numerically definite when lambda_min(Q) > 1e-8 lambda_max(Q)
 _MARGIN_SQUARINGS = 20   # with Q singular, a closed loop must halve within 2^20 steps: rho < 1 - 7e-7
 _ROUNDING_RTOL = 1e-10   # below this residual a Newton step that does not reduce it is rounding
+_LINEAR_EVIDENCE_RTOL = 1e-12  # Newton's residual ratios count as linear convergence only above this residual
+_ROUNDING_STEP_ULPS = 1000     # ... and only for steps above this many ulps of ||P||_F
 _CHECK_RTOL = 1e-8       # relative residual above which no solution is reported
+_ILL_R_RTOL = 1e-8       # R is ill-conditioned for the doubling below lambda_min(R) = 1e-8 x the problem's scale
 _CERTIFY_SQUARINGS = 40  # squarings of A_cl allowed: 2^40 eps keeps the rounding drift below 1e-3
 _CERTIFY_NORM = 0.5      # ||A_cl^(2^k)||_F below this certifies rho(A_cl) < 1 despite that drift
 _BASE = 8                # block size at which the triangular Stein solve is done directly
@@ -95,8 +102,9 @@ class SolveInfo(NamedTuple):
         computed for the DARE; NaN for a Lyapunov solve with ``check=False``).
     method : str
         ``"sda"`` (doubling), ``"sda+newton"`` (Newton-Kleinman from the gain of
-        ``Q + cI``, where the doubling failed on a numerically singular Q), ``"smith"``
-        or ``"schur"``.
+        ``Q + cI``, where the doubling failed on a numerically singular Q), ``"qz"``
+        (scipy's QZ solution, refined and certified, where the doubling failed on a
+        nearly singular R), ``"smith"`` or ``"schur"``.
     steps : int
         Doubling steps (SDA or Smith); 0 for the Schur method.
     refinements : int
@@ -306,9 +314,21 @@ def _newton(A, B, Q, R, state, max_steps: int, *, from_far: bool):
     Schur form's eigenvalues). ``from_far``: the start is a stabilizing gain far from
     the solution, where Newton's residual need not fall monotonically; otherwise
     a step that does not lower the residual ends the refinement (rounding level).
+
+    Linear convergence is judged only on steps above rounding: a ratio of successive
+    residuals counts as evidence only where the residual before the step is above
+    :data:`_LINEAR_EVIDENCE_RTOL` (1e-12) and the step itself above
+    :data:`_ROUNDING_STEP_ULPS` (1000) ulps of P. A limit on the unit circle shows
+    itself long before that: its residual falls about fourfold a step while the error,
+    and so the step, only halves, so at a residual of 1e-12 its steps are still about
+    1e-6 of P. Below, the residual's moves are rounding, whose ratios can fall anywhere
+    (issue 60 saw 3e-5, 3.4e-8, 4.6e-14, 1.3e-14, 4.7e-15; tests/test_riccati_fuzz.py has
+    2.2e-10, 7.8e-14, 5.8e-14, 6.8e-15: the ratios 0.74 and 0.12 of its last two steps were
+    taken for linear convergence, on a problem scipy solves to 2.5e-11).
     """
     certified = ""
     ratios = []
+    ulp = np.finfo(float).eps
     for step in range(max_steps):
         P, F, _, Acl, residual = state
         if residual <= _REFINE_RTOL:
@@ -337,7 +357,9 @@ def _newton(A, B, Q, R, state, max_steps: int, *, from_far: bool):
         trial = _defect(A, B, Q, R, P_next)
         if not trial[3] < residual and (residual <= _ROUNDING_RTOL or not from_far):
             return state, step, solved.method  # rounding level: keep the certified point
-        ratios.append(trial[3] / residual if residual > 0 else 0.0)
+        if residual > _LINEAR_EVIDENCE_RTOL and (np.linalg.norm(correction)
+                                                 > _ROUNDING_STEP_ULPS * ulp * np.linalg.norm(P_next)):
+            ratios.append(trial[3] / residual)
         state, certified = (P_next,) + trial, ""
     if from_far and state[4] > _CHECK_RTOL:
         raise NoStabilizingSolutionError(
@@ -409,6 +431,57 @@ def _from_detectable_problem(A, B, Q, R, G, max_steps):
     return _certified_state(A, B, Q, R, state, certified, lambda: True), steps, newton_steps
 
 
+def _ill_conditioned_input(B, Q, R) -> bool:
+    """Whether R is nearly singular at the problem's scale: ``lambda_min(R) <= 1e-8 max(lambda_max(R), ||B||^2 ||Q||)``.
+
+    The doubling works with ``G = B R^{-1} B'``, which is then 1e8 times the cost's scale
+    or more along some input, and ``W = I + G H`` loses as many digits; it fails (R + B'PB
+    not positive definite, a gain that does not stabilize, a residual that stays large)
+    where that ratio nears 1e14, while the QZ pencil keeps R as it is (of
+    tests/test_riccati_fuzz.py's 3,000 systems, the 14 failures all had ``lambda_min(R)``
+    below 5e-15 of that scale, and scipy solved each to 1e-11 or better; 903 more below
+    1e-8 of it the doubling solves, and they never reach this test).
+    Norms are Frobenius (a bound on the 2-norms, cheap at any size).
+    """
+    eigenvalues = np.linalg.eigvalsh(R)
+    scale = max(float(eigenvalues[-1]), float(np.linalg.norm(B)) ** 2 * float(np.linalg.norm(Q)))
+    return bool(eigenvalues[0] <= _ILL_R_RTOL * scale)
+
+
+def _from_qz(A, B, Q, R, singular, failure):
+    """The stabilizing solution by scipy's QZ solver, refined and certified: ``(state, refinements)``.
+
+    Used only where the doubling path failed and R is ill-conditioned for it
+    (:func:`_ill_conditioned_input`): the generalized eigenproblem of the extended
+    pencil never inverts R. Its P is accepted only as ours would be: Newton refinement,
+    then a residual of at most 1e-8 and a certified stable closed loop
+    (:func:`_certified_state`), so a non-stabilizing or inaccurate QZ answer is refused,
+    with the reason, after the doubling's own (``failure``).
+    """
+    import warnings
+
+    import scipy.linalg
+
+    prefix = (f"{failure}; R is nearly singular at the problem's scale, which the doubling cannot resolve, and "
+              "scipy's QZ solver (which keeps R in its pencil)")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # scipy's own ill-conditioning warnings: judged below
+            P = scipy.linalg.solve_discrete_are(A, B, Q, R)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise NoStabilizingSolutionError(f"{prefix} fails too: {exc}") from None
+    if not np.all(np.isfinite(P)):
+        raise NoStabilizingSolutionError(f"{prefix} returns non-finite entries") from None
+    try:
+        P = _sym(P)
+        state = (P,) + _defect(A, B, Q, R, P)
+        state, refinements, certified = _newton(A, B, Q, R, state, _MAX_REFINEMENTS, from_far=False)
+        state = _certified_state(A, B, Q, R, state, certified, singular)
+    except NoStabilizingSolutionError as exc:
+        raise NoStabilizingSolutionError(f"{prefix} gives no certified solution either: {exc}") from None
+    return state, refinements
+
+
 def solve_discrete_are(A, B, Q, R, *, check: bool = True, full_output: bool = False,
                        max_steps: int = _SDA_MAX_STEPS):
     """Stabilizing solution of the discrete algebraic Riccati equation.
@@ -424,7 +497,10 @@ def solve_discrete_are(A, B, Q, R, *, check: bool = True, full_output: bool = Fa
     singular matrices and is no test), a mode that Q does not see may have been left
     uncontrolled: Newton-Kleinman from the stabilizing gain of ``Q + cI`` finds the
     stabilizing solution if there is one. Well-posed problems (the doubling succeeds)
-    never pay for the eigenvalues of that rank test.
+    never pay for the eigenvalues of that rank test. Where both fail and R is nearly
+    singular at the problem's scale (``lambda_min(R) <= 1e-8 max(lambda_max(R),
+    ||B||^2 ||Q||)``), which the doubling cannot resolve, scipy's QZ solution is refined
+    and certified instead (method ``"qz"``), or the refusal says why it was not.
 
     Parameters
     ----------
@@ -463,7 +539,9 @@ def solve_discrete_are(A, B, Q, R, *, check: bool = True, full_output: bool = Fa
         the residual stays large or the closed loop is not stable); with a singular Q
         the fallback's (the gain of ``Q + cI`` does not stabilize; Newton converges
         only linearly, or to a closed loop within about 1e-6 of the unit circle,
-        which to working precision is an unobserved mode on the circle).
+        which to working precision is an unobserved mode on the circle). With a nearly
+        singular R, the message adds why scipy's QZ solution was not accepted either
+        (scipy fails, or its P is not certified: residual or closed loop).
     """
     import scipy.linalg
 
@@ -492,12 +570,22 @@ def solve_discrete_are(A, B, Q, R, *, check: bool = True, full_output: bool = Fa
         state, refinements, certified = _newton(A, B, Q, R, state, _MAX_REFINEMENTS, from_far=False)
         if check:
             state = _certified_state(A, B, Q, R, state, certified, singular)
-    except NoStabilizingSolutionError:
-        if not singular():
-            raise  # (Q, A) is observable, so the doubling found the stabilizing solution if any
-        # Q is singular to working precision: the doubling's failure proves nothing.
-        state, steps, refinements = _from_detectable_problem(A, B, Q, R, G, max_steps)
-        method = "sda+newton"
+    except NoStabilizingSolutionError as failure:
+        state = None
+        if singular():
+            # Q is singular to working precision: the doubling's failure proves nothing.
+            try:
+                state, steps, refinements = _from_detectable_problem(A, B, Q, R, G, max_steps)
+                method = "sda+newton"
+            except NoStabilizingSolutionError as again:
+                failure = again
+        if state is None:
+            if not _ill_conditioned_input(B, Q, R):
+                # (Q, A) observable and R well scaled: the doubling found the stabilizing solution
+                # if any (or, with Q singular, Newton from the gain of Q + cI did).
+                raise failure from None
+            state, refinements = _from_qz(A, B, Q, R, singular, failure)
+            steps, method = 0, "qz"
     P, residual = state[0], state[4]
     info = SolveInfo(residual=residual, method=method, steps=steps, refinements=refinements)
     return (P, info) if full_output else P

@@ -16,7 +16,7 @@ import numpy as np
 from .design import INFO_MODELS, Design, count_links
 from .evaluation import (MAX_VALIDATION_SIZE, PRECISION_TARGET, VALIDATION_SIZE, exact_cost, simulate,
                          simulate_to_precision, validation_set)
-from .status import DIVERGED, USABLE
+from .status import DIVERGED, FAILED, USABLE
 
 __all__ = ["score", "evaluate"]
 
@@ -32,6 +32,26 @@ def _support(instance, controller):
     if support.shape == (instance.m, instance.n) and support.shape != (instance.nodes, instance.nodes):
         support = instance.node_support(support)  # a gain's entries, input by state
     return support
+
+
+def _non_finite(controller) -> str | None:
+    """The name of a controller array holding NaN or an infinity, or None (also for a controller without arrays).
+
+    Such a controller is a method's arithmetic gone wrong, not a closed loop that blows up: its
+    design is ``failed``, not ``diverged`` (a finite unstable gain is the latter).
+    """
+    arrays = getattr(controller, "arrays", None)
+    if arrays is None:
+        return None
+    try:
+        items = dict(arrays()).items()
+    except Exception:  # noqa: BLE001 - a controller whose arrays cannot be read is scored as before
+        return None
+    for name, value in items:
+        value = np.asarray(value)
+        if value.dtype.kind in "fc" and not np.all(np.isfinite(value)):
+            return name
+    return None
 
 
 def score(
@@ -76,8 +96,9 @@ def score(
         simulated estimate of :func:`evaluate` with its standard error
         (``"simulated"``: the validation-set control-variate estimate, refined
         where a pilot says so); status ``"diverged"`` when a draw of either
-        leaves the bound. A simulated cost is always computed here, whatever
-        ``extras`` hold.
+        leaves the bound, ``"failed"`` (no controller kept) when the controller's
+        arrays hold NaN or infinities. A simulated cost is always computed here,
+        whatever ``extras`` hold.
     """
     support = _support(instance, controller)
     if support is not None:
@@ -90,6 +111,11 @@ def score(
     info_model = info_model or getattr(controller, "info_model", None) or ("instantaneous" if links else "none")
     if info_model not in INFO_MODELS:
         raise ValueError(f"info_model must be one of {INFO_MODELS}, got {info_model!r}")
+    bad = _non_finite(controller)
+    if bad is not None:
+        why = f"the controller's {bad} has NaN or infinite entries: no controller to score"
+        return Design.failure("", dict(params or {}), FAILED, "; ".join(filter(None, [why, message])),
+                              info_model=info_model, seconds=seconds, extras=dict(extras or {}))
     design = Design(method="", params=dict(params or {}), controller=controller, cost=1.0, links=int(links),
                     self_loops=int(self_loops), info_model=info_model, message=message, seconds=seconds,
                     extras=dict(extras or {}))

@@ -11,9 +11,21 @@ A solver's own status words (cvxpy's ``optimal_inaccurate``, ``user_limit``,
 ...) are not design statuses; :data:`SOLVER_STATUS` is the one policy that turns
 them into ours. Code that inspects a raw solver status compares it with cvxpy's
 constants (``cvxpy.OPTIMAL``), not with these.
+
+The stability rule is here too, because it decides between ``optimal`` and
+``diverged`` for every static design: a closed loop is stable when its spectral radius
+is below ``1 - tol``, and ``tol`` is measured in the plant's own time
+(:func:`stability_tol`): a tenth of the decay per step of the plant's slowest decaying
+mode, capped at :data:`STABILITY_TOL` = 1e-6. A fixed margin per step would make the
+verdict depend on the sampling time the model's author chose (a stable plant with a
+mode at -5e-6 1/s, held at dt = 0.01, has radius 1 - 5e-8 and was called unstable);
+a ratio of two decays does not. Plants whose modes all decay by 1e-5 a step or more
+(every shipped instance) keep the fixed margin and every verdict.
 """
 
 from __future__ import annotations
+
+import weakref
 
 import numpy as np
 
@@ -29,6 +41,10 @@ __all__ = [
     "SOLVER_STATUS",
     "INACCURATE_RTOL",
     "STABILITY_TOL",
+    "STABILITY_FRACTION",
+    "STABILITY_RESOLVED",
+    "stability_tol",
+    "is_stable",
     "solver_status",
     "vet_solver_cost",
 ]
@@ -74,13 +90,108 @@ SOLVER_STATUS = {
 #: e.g. 1e29 on infeasible supports).
 INACCURATE_RTOL = 1e-3
 
-#: A static design (a gain ``u = K x``, or a delayed gain on its augmented loop) is usable
-#: only if its closed loop's spectral radius is below ``1 - STABILITY_TOL``; otherwise it
-#: is ``diverged``. The benchmark's cost is a finite-horizon one, finite for unstable gains
-#: too, so the cost alone cannot say this. The margin is far above the eigenvalue solver's
-#: error on these loops (about 1e-12 relative), and a loop within it of the unit circle
-#: (a time constant of a million steps or more) stabilizes nothing a report should count.
+#: The stability rule's margin, at most: a static design (a gain ``u = K x``, or a delayed
+#: gain on its augmented loop) is usable only if its closed loop's spectral radius is below
+#: ``1 - tol``, where ``tol`` is this, or less on a plant with a slow mode of its own
+#: (:func:`stability_tol`); otherwise the design is ``diverged``. The benchmark's cost is a
+#: finite-horizon one, finite for unstable gains too, so the cost alone cannot say this.
+#: The margin is far above the eigenvalue solver's error on these loops (about 1e-12
+#: relative), and on a plant whose own modes decay by 1e-5 a step or faster a loop within
+#: it of the unit circle (a time constant of a million steps or more) stabilizes nothing a
+#: report should count.
 STABILITY_TOL = 1e-6
+#: On a plant with a slow stable mode, the margin is this fraction of that mode's decay per
+#: step ``1 - |lambda|``: a closed loop counts as stable when it decays at least a tenth as
+#: fast as the plant's own slowest decaying mode (:func:`stability_tol`).
+STABILITY_FRACTION = 0.1
+#: A plant mode gives a time scale only when it decays by at least this much a step
+#: (``|lambda| <= 1 - 1e-8``): closer to the circle, the eigenvalue solver cannot tell decay
+#: from rounding (a double eigenvalue on the circle comes out within about sqrt(eps) =
+#: 1.5e-8 of it), and the plant counts as having no slow decay of its own.
+STABILITY_RESOLVED = 1e-8
+
+# stability_tol's answer per instance (the eigenvalues of A, computed at most once).
+_TOLERANCES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def stability_tol(instance=None) -> float:
+    """The stability rule's margin on this plant: a closed loop is stable when its radius is below ``1 - tol``.
+
+    A margin on the spectral radius is a statement about decay per step, and a step is
+    whatever the model's author chose: the same plant sampled ten times finer has every
+    ``1 - |lambda|`` ten times smaller. A fixed margin therefore calls a finely sampled
+    stable plant unstable (a continuous-time mode at -5e-6 1/s, held at dt = 0.01, has
+    radius ``1 - 5e-8``; :data:`STABILITY_TOL` would need it at ``1 - 1e-6``). The rule
+    here measures decay in the plant's own time instead: with ``d`` the decay per step
+    ``1 - |lambda|`` of the slowest of A's modes that visibly decay (``d >=``
+    :data:`STABILITY_RESOLVED`),
+
+        tol = min(STABILITY_TOL, STABILITY_FRACTION * d),
+
+    and ``tol = STABILITY_TOL`` where no mode decays visibly (an unstable plant whose modes
+    are all outside, or on, the circle; an undamped chain with every mode on it). So a
+    closed loop counts as stable when it decays at least a tenth as fast as the plant's own
+    slowest mode, or by 1e-6 a step, whichever asks less; the ratio of two decays does not
+    depend on the sampling time (to first order in ``d``), so neither does the verdict on
+    a slow plant. It never asks more than the fixed margin did: every plant whose modes
+    all decay by 1e-5 a step or more (every shipped instance) keeps the margin 1e-6 and
+    every verdict, and a plant with a slow mode keeps a margin at least 1e-9, a thousand
+    times the eigenvalue solver's error on these loops.
+
+    Parameters
+    ----------
+    instance : Instance or array_like, optional
+        The plant (anything with an ``A``), or its A itself. None: no plant, the fixed
+        margin :data:`STABILITY_TOL`.
+
+    Returns
+    -------
+    float
+        In ``[1e-9, 1e-6]``. Computed from A's eigenvalues once per instance.
+    """
+    if instance is None:
+        return STABILITY_TOL
+    A = getattr(instance, "A", None)
+    if A is None:
+        return _tolerance(np.asarray(instance, dtype=float))
+    try:
+        return _TOLERANCES[instance]
+    except (KeyError, TypeError):
+        pass
+    tol = _tolerance(np.asarray(A, dtype=float))
+    try:
+        _TOLERANCES[instance] = tol
+    except TypeError:  # not weakly referable: computed again next time
+        pass
+    return tol
+
+
+def _tolerance(A: np.ndarray) -> float:
+    moduli = np.abs(np.linalg.eigvals(A))
+    decaying = moduli[moduli <= 1.0 - STABILITY_RESOLVED]
+    if decaying.size == 0:
+        return STABILITY_TOL
+    return float(min(STABILITY_TOL, STABILITY_FRACTION * (1.0 - decaying.max())))
+
+
+def is_stable(radius, instance=None) -> bool:
+    """Whether a closed loop of this spectral radius counts as stable: ``radius < 1 - stability_tol(instance)``.
+
+    Parameters
+    ----------
+    radius : float
+        The closed loop's spectral radius (NaN and inf are unstable).
+    instance : Instance or array_like, optional
+        The plant, whose own slowest decay sets the margin (:func:`stability_tol`);
+        without it, the fixed margin :data:`STABILITY_TOL`. The plant's eigenvalues are
+        computed only where they can change the answer (a radius in ``[1 - 1e-6, 1)``).
+    """
+    radius = float(radius)
+    if not radius < 1.0:
+        return False
+    if radius < 1.0 - STABILITY_TOL:
+        return True
+    return instance is not None and radius < 1.0 - stability_tol(instance)
 
 
 def solver_status(raw) -> str:

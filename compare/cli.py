@@ -77,11 +77,11 @@ def _check_writable(path: Path, option: str = "--out") -> None:
             return
 
 
-def _open_store(path: Path, *, create: bool = True):
+def _open_store(path: Path, *, create: bool = True, read_only: bool = False):
     from .run.store import Store, StoreError
 
     try:
-        return Store(path, create=create)
+        return Store(path, create=create, read_only=read_only)
     except StoreError as exc:
         raise UserError(str(exc)) from None
     except OSError as exc:
@@ -90,10 +90,11 @@ def _open_store(path: Path, *, create: bool = True):
 
 @contextmanager
 def _reading_store(path: Path):
-    """An existing store opened for ``compare report`` or ``export``; a store fault while reading exits 2."""
+    """An existing store opened read-only for ``compare report`` or ``export`` (its bytes stay as they were);
+    a store fault while reading exits 2."""
     from .run.store import StoreError
 
-    with _open_store(path, create=False) as store:
+    with _open_store(path, create=False, read_only=True) as store:
         try:
             yield store
         except StoreError as exc:
@@ -122,10 +123,15 @@ def _interrupt_on_sigterm():
 
 @contextmanager
 def _store_for_run(path: Path):
-    """The store a run writes; one this command created is removed again if the command fails before any run."""
+    """The store a run writes; one this command created is removed again if the command fails before any run.
+
+    So are the folders it was created in, where this command made them and they hold nothing
+    else: a failed or interrupted first run leaves no empty output folder behind.
+    """
     from .run.store import StoreError
 
     created = not path.exists()
+    made = [folder for folder in (path.parent, *path.parent.parents) if not folder.exists()]  # innermost first
     store = _open_store(path)
     try:
         yield store
@@ -137,6 +143,11 @@ def _store_for_run(path: Path):
         store.close()
         if created and empty:
             path.unlink(missing_ok=True)
+            for folder in made:
+                try:
+                    folder.rmdir()
+                except OSError:  # something else was written there: keep it
+                    break
         raise
     store.close()
 
@@ -300,6 +311,7 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
     _check_writable(out)
     path = _store_path(out, store_path)
     _check_writable(path.parent, "--store")
+    new_store = not path.exists()
     try:
         # The executor first: an address that does not work is refused before a store is created.
         with _interrupt_on_sigterm(), open_executor(executor, workers) as pool, _store_for_run(path) as store:
@@ -307,8 +319,13 @@ def run(experiment, out, store_path, workers, executor, progress, plugins, wait)
                 summary = run_experiment(spec, store, workers=workers, progress=progress, executor=pool,
                                          wait_for_others=wait)
             except KeyboardInterrupt:
-                click.echo(f"\ninterrupted: {len(store)} runs are stored in {store.path}; "
-                           "run the same command again to resume.", err=True)
+                stored = len(store)
+                if stored == 0 and new_store:  # _store_for_run removes the store it created: do not name it
+                    click.echo("\ninterrupted before any run was stored; nothing was kept. Run the same command "
+                               "again to start.", err=True)
+                else:
+                    click.echo(f"\ninterrupted: {stored} runs are stored in {store.path}; "
+                               "run the same command again to resume.", err=True)
                 sys.exit(130)
             click.echo(str(summary))
             command = f"compare run {experiment}" + (f" --out {out}" if out != RESULTS / spec.name else "")

@@ -63,7 +63,7 @@ def test_the_report_gives_each_methods_gap_to_the_best_pattern(tmp_path):
     assert result.exit_code == 0, result.output
     report = (tmp_path / "out" / "report.md").read_text()
     section = report.split("## Gap to the best pattern found", 1)[1].split("\n## ", 1)[0]
-    assert "instantaneous information" in section and "| ≤ 0 | ≤ 1 |" in section
+    assert "instantaneous information" in section and "| ≤ 0 links | ≤ 1 link |" in section
     rows = {line.split(" | ")[0].lstrip("| "): line for line in section.splitlines() if line.startswith("| ")}
     truncation = rows["Truncated LQR K"].split(" | ")[2:]
     assert all(cell.strip(" |") in ("0", "—") or cell.startswith("+") for cell in truncation)  # never below

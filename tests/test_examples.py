@@ -21,3 +21,18 @@ def test_first_steps_notebook_runs_and_plots_four_methods(tmp_path, monkeypatch)
     assert [p.name for p in tmp_path.iterdir()] == ["results"]
     design = namespace["d"]
     assert design.method == "nearest_lqr" and design.cost_kind == "exact" and design.cost >= 1 - 1e-9
+
+
+GRAPHS = EXAMPLE.parent / "graph_against_controller.py"
+
+
+def test_graph_against_controller_notebook_splits_every_excess(monkeypatch, tmp_path):
+    monkeypatch.setenv("EXAMPLES_SMALL", "1")
+    monkeypatch.chdir(tmp_path)
+    namespace = runpy.run_path(str(GRAPHS), run_name="__main__")
+    gaps = namespace["gaps"]
+    assert len(gaps) >= 3
+    # The value of a design's graph is at most its own cost, and no graph within its budget is worth less
+    # than the best: both gaps are non-negative, and the densest design's graph is the best within its budget.
+    assert (gaps[:, 2] >= -1e-12).all() and (gaps[:, 3] >= -1e-12).all()
+    assert gaps[gaps[:, 0].argmax(), 2] == 0

@@ -101,34 +101,57 @@ def _bullets(lines):
     return [line for line in lines if line.startswith("- ")]
 
 
+NB = "\u00a0"
+
+
+def _table(lines, first="| first − second |"):
+    """The findings table after its header ``first``: row label (its first line) -> column -> cell."""
+    i = next(k for k, line in enumerate(lines) if line.startswith(first))
+    header = [c.strip() for c in lines[i].split("|")[1:-1]]
+    rows = {}
+    for line in lines[i + 2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.split("|")[1:-1]]
+        rows[cells[0].split("<br>")[0]] = dict(zip(header[1:], cells[1:]))
+    return rows
+
+
 def test_the_first_finding_is_the_delayed_result(comparisons, records):
     lines = findings_markdown(comparisons, excluded_total=len(unresolved(records)))
-    assert lines[:2] == ["## Findings", ""] and lines[2].startswith("- **")  # with power, the first sentence is a claim
-    assert "![forest plot](forest.png)" in lines  # the figure the claims come from, after them
-    bullets = _bullets(lines)
-    # the winner first, in bold, then the information models and where it holds
-    assert bullets[0].startswith(f"- **{SD} beats {TANH}** (both delayed) at ≤ 20, ≤ 60 and ≤ 140 links and overall:")
-    assert f"{TANH} costs +0.10 more" in bullets[0]
-    assert "Holm p ≤" in bullets[0] and "n = 12 per cell, 1 re-paired per cell" in bullets[0]
-    # one bullet per pair, the bound after same-model claims, cross-model ones last
-    order = [i for i, b in enumerate(bullets) if f"the {BOUND_LABEL}**" in b]
-    cross = [i for i, b in enumerate(bullets) if "(crosses models:" in b]
-    assert order and cross and max(order) < min(cross)
-    assert len(bullets) == len({(c.a, c.b) for c in comparisons})
-    # short: a researcher reads each in seconds
-    assert all(len(b.split()) <= 60 for b in bullets), max(bullets, key=lambda b: len(b.split()))
+    # the table first, shown open however long (no sign test is out of reach here: no note before it)
+    assert lines[:4] == ["## Findings", "", "<!-- table: open -->", ""]
+    assert "![forest plot](forest.png)" in lines  # the figure the cells come from, after them
+    rows = _table(lines)
+    # rows are the pairs, columns the budgets; each cell the median [interval], k/n and a mark
+    first = f"{TANH} − {SD}"
+    assert list(rows)[0] == first
+    assert list(rows[first]) == ["≤ 20 links", "≤ 60 links", "≤ 140 links", "any"]
+    for cell in rows[first].values():
+        assert cell == f"+0.1000<br>[+0.1000, +0.1000]<br>12/12{NB}▲"  # the learned design costs more, beaten
+    # one row per pair, the bound after same-model rows, cross-model rows last
+    labels = list(rows)
+    order = [i for i, x in enumerate(labels) if x.endswith(BOUND_LABEL)]
+    cross = [i for i, line in enumerate(lines[4:]) if "<br>information:" in line]
+    assert order and cross and len(labels) == len({(c.a, c.b) for c in comparisons})
+    assert max(order) < min(i for i, x in enumerate(labels) if x.startswith(f"{TANH} − {ADMM}"))
+    # one panel: no pooled rows and no per-panel detail; bullets only for what the table cannot say
+    assert not any("table: folded" in line for line in lines)
+    assert _bullets(lines) == [f"- **{SLS}: plant graph − {BOUND_LABEL}**: The gap is what restricting "
+                               "communication to the plant graph costs."]
     statistics = lines[-2]
-    assert statistics.startswith("Statistics:") and len(statistics.split()) <= 135  # five verdicts, once
+    assert statistics.startswith("Statistics:") and len(statistics.split()) <= 135
     assert "2 unresolved simulated costs" in statistics and f"K = {len(comparisons)} comparisons" in statistics
-    # the five verdicts are defined there, once, the margin with its reasons
-    assert all(statistics.count(word) == 1 for word in ("**Beats**", "**costs more/less**", "**no clear difference**",
-                                                         "**equal within 0.1 % of LQR's cost**", "**mixed**"))
-    assert "third decimal" in statistics and "tolerances" in statistics and "budget fronts" in statistics
+    # equal and mixed are defined there, once, the margin with its reasons; the marks under the table
+    assert statistics.count("**Equal within 0.1 % of LQR's cost**") == 1 and statistics.count("**Mixed**") == 1
+    assert "third decimal" in statistics and "tolerances" in statistics
+    legend = next(line for line in lines if line.startswith("Each cell:"))
+    assert all(mark in legend for mark in ("▲", "▼", "△", "▽", "○", "=", "±", "?"))
     # without the count, the line still says that unresolved costs were dropped, never that there were none;
-    # exact counts: (cell, instance) pairings, and with the records over how many instances
+    # exact counts: (panel, budget, instance) pairings, and with the records over how many instances
     changed = sum(c.excluded for c in comparisons)
-    assert f"changing {changed} (cell, instance) pairings." in findings_markdown(comparisons)[-2]
-    assert (f"changing {changed} (cell, instance) pairings over 2 instances."
+    assert f"changing {changed} (panel, budget, instance) pairings." in findings_markdown(comparisons)[-2]
+    assert (f"changing {changed} (panel, budget, instance) pairings over 2 instances."
             in findings_markdown(comparisons, records=records)[-2])
 
 
@@ -136,9 +159,8 @@ def test_no_clear_difference_where_wins_split(comparisons):
     cells = _find(comparisons, LINEAR, TANH)
     assert all(c.paired.a_wins == c.paired.b_wins == N // 2 for c in cells[1:])
     assert all(c.verdict == "no significant difference" for c in cells)
-    (bullet,) = [b for b in _bullets(findings_markdown(comparisons)) if f"{LINEAR} and {TANH}" in b]
-    assert bullet.startswith(f"- **No clear difference between {LINEAR} and {TANH}** (both delayed)")
-    assert "beats" not in bullet and "costs more than" not in bullet and "costs less than" not in bullet
+    row = _table(findings_markdown(comparisons))[f"{LINEAR} − {TANH}"]
+    assert all(cell.endswith("○") and cell.startswith("0<br>[") for cell in row.values())
 
 
 def test_an_unresolved_cost_is_excluded_and_counted(records, comparisons):
@@ -164,10 +186,8 @@ def test_the_bound_is_recognised_by_its_params_under_a_shared_label(records, com
     assert plant.paired.median == pytest.approx(0.03)
     for a in (TANH, LINEAR, GRNN):
         assert _find(comparisons, a, BOUND_LABEL)[0].verdict == "worse"
-    text = "\n".join(findings_markdown(comparisons))
-    # the body names it short, once the headline has named it in full
-    assert f"- **{SD} is beaten by the {BOUND_LABEL}** (both delayed) overall: Sparse K, delayed costs +0.050 " \
-        "more" in text
+    row = _table(findings_markdown(comparisons))[f"{SD} − {BOUND_LABEL}"]
+    assert {k: v for k, v in row.items() if v} == {"any": f"+0.0500<br>[+0.0500, +0.0500]<br>12/12{NB}▲"}
 
 
 def test_cross_model_comparisons_are_marked_cross(comparisons):
@@ -176,9 +196,12 @@ def test_cross_model_comparisons_are_marked_cross(comparisons):
         assert len(cells) == 4 and all(c.relation == "cross" and c.info_b == info for c in cells)
     assert not [c for c in comparisons if c.a == LINEAR and c.b in (ADMM, DEC)]  # tanh only
     text = "\n".join(findings_markdown(comparisons))
-    # the models in the order the verdict names the designs: the winner's first
-    assert f"- **{ADMM} beats {TANH}** (crosses models: instantaneous vs delayed)" in text
-    assert f"- **{TANH} beats {DEC}** (crosses models: delayed vs no communication)" in text
+    # the models under the pair, in the order the row names the designs
+    assert f"| {TANH} − {ADMM}<br>information: delayed vs instantaneous |" in text
+    assert f"| {TANH} − {DEC}<br>information: delayed vs none |" in text
+    rows = _table(text.splitlines())
+    assert all(cell.endswith("▲") for cell in rows[f"{TANH} − {ADMM}"].values())
+    assert all(cell.endswith("▼") for cell in rows[f"{TANH} − {DEC}"].values())
 
 
 def test_pairs_a_spec_asks_for_resolve_method_names_and_skip_absent_methods(records):
@@ -207,14 +230,13 @@ def test_an_interval_excluding_0_is_no_claim_unless_the_holm_adjusted_test_agree
         assert c.paired.low > 0 and not c.too_few and c.p_value == pytest.approx(2 / 128)
         assert c.p_holm == pytest.approx(4 * 2 / 128) and c.verdict == "no significant difference"
     lines = findings_markdown(comparisons)
-    (bullet,) = _bullets(lines)
-    # the direction leads, and the text says why it is no claim
-    assert bullet.startswith(f"- **{TANH} costs more than {SD} on 7 of 7 instances** (both delayed) at ≤ 20, ≤ 60 "
-                             "and ≤ 140 links and overall, +0.10; not significant after Holm's correction over K = 4 "
-                             f"comparisons (Holm p ≥ {4 * 2 / 128:.2g})")
-    assert "beats" not in bullet and "no clear difference" not in bullet.lower()
-    # no sign test on 7 instances passes Holm over 4: said once, before the claims
-    assert any("none can pass Holm's correction over K = 4 comparisons" in line for line in lines)
+    (row,) = _table(lines).values()
+    # the direction, and the mark says it is no claim: △, not ▲
+    assert all(cell == f"+0.1000<br>[+0.1000, +0.1000]<br>7/7{NB}△" for cell in row.values())
+    assert not _bullets(lines)
+    # no sign test on 7 instances passes Holm over 4: said once, before the table
+    assert lines[2] == ("No test can show significance here: with at most 7 instances per budget the smallest sign-test "
+                        "p is 0.016, and Holm's correction over the K = 4 tests asks for p < 0.013.")
     fig, axes = plot_forest(comparisons, {})
     assert all(to_hex(m.get_markerfacecolor()) == "#ffffff" for m in axes[0].lines if m.get_gid() == "forest-median")
     plt.close(fig)
@@ -228,48 +250,74 @@ def test_ten_of_ten_over_many_comparisons_gives_the_direction_never_no_differenc
     k = len(comparisons)
     assert k >= 26 and all(c.p_holm >= 0.05 for c in comparisons)  # 10 of 10: p = 2 / 1024, and 26 × p > 0.05
     text = "\n".join(findings_markdown(comparisons))
-    (bullet,) = [b for b in _bullets(text.splitlines()) if b.startswith(f"- **{TANH} costs more than {SD} ")]
-    assert bullet.startswith(f"- **{TANH} costs more than {SD} on 10 of 10 instances** (both delayed)")
-    assert f"not significant after Holm's correction over K = {k} comparisons" in bullet
-    assert f"- **{TANH} costs more than the {BOUND_LABEL} on 10 of 10 instances**" in text
-    bullets = "\n".join(_bullets(text.splitlines()))
-    assert "no significant difference" not in text.lower() and " beats " not in bullets
-    assert "No clear difference" not in bullet
+    rows = _table(text.splitlines())
+    assert all(cell.endswith(f"10/10{NB}△") for cell in rows[f"{TANH} − {SD}"].values())
+    assert rows[f"{TANH} − {BOUND_LABEL}"]["any"].endswith(f"10/10{NB}△")
+    assert f"Holm-corrected over the K = {k} comparisons" in text
+    assert "▲" not in text.split("Each cell:")[0] and "▼" not in text.split("Each cell:")[0]
 
 
 def _cell(a_norm, budget, median, low, high, p_holm, *, n=30, a="A", b="B"):
-    """A hand-made comparison: ``a`` against ``b`` on one panel and budget."""
+    """A hand-made comparison: ``a`` against ``b`` on one panel and budget, its differences spread over the interval."""
+    import numpy as np
+
     a_wins = n if high < 0 else 0
     paired = Paired(a, b, budget, n, a_wins, n - a_wins, median, low, high, 0.99)
     return Comparison(("paper", 8, a_norm), a, b, budget, paired, "same", "delayed", "delayed", p_holm / 10, p_holm,
-                      group="same information model: delayed", panel_instances=n)
+                      group="same information model: delayed", panel_instances=n,
+                      differences=tuple(np.linspace(low, high, n)))
 
 
-def test_a_claim_that_fails_in_one_cell_names_that_cell():
+def _detail(lines):
+    """The per-panel table: (pair, panel) -> column -> cell."""
+    i = next(k for k, line in enumerate(lines) if line.startswith("| first − second, per panel |"))
+    header = [c.strip() for c in lines[i].split("|")[1:-1]]
+    out, pair = {}, None
+    for line in lines[i + 2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.split("|")[1:-1]]
+        if cells[0].startswith("**"):
+            pair = cells[0].strip("*")
+            continue
+        out[(pair, cells[0])] = dict(zip(header[1:], cells[1:]))
+    return out
+
+
+def test_a_claim_that_fails_in_one_cell_keeps_its_own_mark_in_the_detail():
     cells = [_cell(norm, budget, 0.05, 0.03, 0.07, 1e-6) for norm in (0.995, 1.1, 1.2) for budget in (20, None)]
     cells[-2] = _cell(1.2, 20, 0.08, 0.026, 0.19, 0.13)  # interval excludes 0, Holm does not
     cells[2] = _cell(1.1, 20, 0.018, 0.011, 0.023, 1e-4)  # the weakest claim
-    (bullet,) = _bullets(findings_markdown(cells))
-    assert bullet == ("- **B beats A** (both delayed) at ≤ 20 links and overall in every panel but one: A costs +0.018 "
-                      "to +0.050 more (weakest +0.018 [+0.011, +0.023], ‖A‖₂ = 1.1, ≤ 20 links; n = 30 per cell; "
-                      "Holm p ≤ 0.0001). Same direction, not significant after Holm's correction, at ≤ 20 links on "
-                      "‖A‖₂ = 1.2 (Holm p = 0.13).")
+    lines = findings_markdown(cells)
+    detail = _detail(lines)
+    assert detail[("A − B", "‖A‖₂ = 1.2")]["≤ 20 links"] == f"+0.08<br>[+0.03, +0.19]<br>30/30{NB}△"
+    # two significant digits in the interval's width, no more: +0.018 [+0.011, +0.023]
+    assert detail[("A − B", "‖A‖₂ = 1.1")]["≤ 20 links"] == f"+0.018<br>[+0.011, +0.023]<br>30/30{NB}▲"
+    # pooled over the three panels: 90 instances, one test per budget, Holm over the two
+    row = _table(lines)["A − B"]
+    assert row["≤ 20 links"].endswith(f"90/90{NB}▲") and row["any"].endswith(f"90/90{NB}▲")
+    assert "folded: the same, panel by panel" in "\n".join(lines)
 
 
-def test_cells_against_the_headline_get_their_own_verdicts():
+def test_cells_against_the_pooled_row_make_it_mixed_and_get_a_bullet():
     cells = [_cell(norm, None, -0.05, -0.07, -0.03, 1e-6) for norm in (0.995, 1.1)]
     cells += [_cell(1.2, None, 0.04, 0.02, 0.06, 0.01),  # significant the other way
               _cell(0.995, 20, 0.01, -0.01, 0.02, 1.0),  # interval contains 0
               _cell(1.1, 20, 0.01, 0.005, 0.02, 0.2),  # the other way, not significant
               replace(_cell(1.2, 20, 0.0, -0.1, 0.1, 1.0, n=4), paired=Paired("A", "B", 20, 4, 1, 3, 0.0, -0.1, 0.1,
                                                                                 0.88))]
-    (bullet,) = _bullets(findings_markdown(cells))
-    assert bullet.startswith("- **A beats B** (both delayed) overall on ‖A‖₂ = 0.995 and 1.1: B costs +0.050 more")
-    assert "But **B beats A** overall on ‖A‖₂ = 1.2 (+0.040; Holm p = 0.01)." in bullet
-    assert ("Opposite direction, not significant after Holm's correction, at ≤ 20 links on ‖A‖₂ = 1.1 "
-            "(Holm p = 0.2).") in bullet
-    assert "No clear difference at ≤ 20 links on ‖A‖₂ = 0.995." in bullet
-    assert bullet.endswith("Too few instances at ≤ 20 links on ‖A‖₂ = 1.2.")
+    lines = findings_markdown(cells)
+    detail = _detail(lines)
+    marks = {(panel, budget): cell[-1] for (_, panel), row in detail.items() for budget, cell in row.items() if cell}
+    assert marks == {("‖A‖₂ = 0.995", "any"): "▼", ("‖A‖₂ = 1.1", "any"): "▼", ("‖A‖₂ = 1.2", "any"): "▲",
+                     ("‖A‖₂ = 0.995", "≤ 20 links"): "○", ("‖A‖₂ = 1.1", "≤ 20 links"): "△",
+                     ("‖A‖₂ = 1.2", "≤ 20 links"): "?"}
+    # pooled with any number of links, A costs less on 60 of 90, but on ‖A‖₂ = 1.2 B beats A: mixed, said why
+    assert _table(lines)["A − B"]["any"].endswith(f"60/90{NB}±")
+    (bullet,) = _bullets(lines)
+    assert bullet.startswith("- **A − B, mixed (±)**: pooled with any number of links, A costs less on 60 of 90 "
+                             "instances, yet on ‖A‖₂ = 1.2 B costs less (median +0.040)")
+    assert len(bullet.split()) <= 60
 
 
 def test_too_few_instances_give_counts_only():
@@ -280,10 +328,10 @@ def test_too_few_instances_give_counts_only():
     comparisons = select_comparisons(Records.from_rows(rows), budgets=(None,))
     (c,) = comparisons
     assert c.too_few and c.verdict == "too few" and not c.significant
-    (bullet,) = _bullets(findings_markdown(comparisons))
-    assert bullet.startswith(f"- **Too few instances to compare {TANH} and {SD}** (both delayed) overall: "
-                             f"{TANH} costs more on 3 of 3, with no 95 % interval")
-    assert "beats" not in bullet and "significant" not in bullet and "p ≤" not in bullet
+    lines = findings_markdown(comparisons)
+    (row,) = _table(lines).values()
+    assert row == {"any": f"+0.10<br>3/3{NB}?"}  # the median alone: no interval, counts only
+    assert not _bullets(lines)
     fig, axes = plot_forest(comparisons, {})
     (marker,) = [line for line in axes[0].lines if line.get_gid() == "forest-median"]
     assert to_hex(marker.get_markeredgecolor()) == "#999999" and to_hex(marker.get_markerfacecolor()) == "#ffffff"

@@ -227,8 +227,10 @@ def test_reports_tell_readouts_and_warm_starts_apart():
                     "grnn_sparse_linear_per_node_warm_delayed"]
     styles = [style_for("grnn_sparse", p) for p in (paper, per_node, warm, delayed)]
     assert len({(s.colour, s.marker) for s in styles}) == 4
-    assert styles[1].colour == styles[2].colour == METHOD_STYLES["grnn_sparse"][0]  # the variant's colour
-    assert styles[3].colour == METHOD_STYLES["grnn_sparse_linear"][0]
+    # each readout and start its own colour (they shared GRNN-Sparse's orange, and their bands fused), the linear
+    # ones hollow; the built-in table holds them
+    assert len({s.colour for s in styles}) == 4 and styles[0].colour == METHOD_STYLES["grnn_sparse"][0]
+    assert styles[3].colour == METHOD_STYLES["grnn_sparse_linear_per_node_warm_delayed"][0] and styles[3].face == "none"
     assert {s.info_model for s in styles} == {"delayed"}
     assert [kind_suffix("grnn_sparse", p) for p in (paper, per_node, warm, delayed)] == [
         "", " (per-node)", " (per-node, warm: diagonal)", " (per-node, warm: delayed)"]

@@ -5,7 +5,9 @@ page written here by :func:`compare.report.write_report` from a small grid of pa
 (two N by two ‖A‖₂, so the N × ‖A‖₂ grid with links per node): the boxes of the
 interactive figures' axis titles, tick labels, legends and plot areas do not intersect
 (within one panel plot, or between panels), none leaves its plot or the window, the
-page is not wider than the window, and every image is a link to its file. One browser
+page is not wider than the window, every image is a link to its file, no PNG is wider
+than 1,700 px, and every image's smallest text, its size read from the figure's SVG
+(``figure_legibility.py``) and scaled to the width the page shows it at, is 9 px tall. One browser
 and one tab serve every page; each page is loaded once at 1400 px and checked again
 after the window narrows to 800 px, so that the reflow itself is checked. A shipped page
 written before the per-panel figures is skipped, saying so; ``COMPARE_REPORTS=FOLDER``
@@ -24,6 +26,7 @@ import pytest
 
 pytest.importorskip("plotly", reason="plotly is not installed")
 
+from figure_legibility import MAX_PNG_PX, SCREEN_PX, legibility  # noqa: E402  (tests/figure_legibility.py)
 from test_report_browser import _browser_path, _row  # noqa: E402  (tests/test_report_browser.py)
 
 from compare.run.records import Records, canonical_key  # noqa: E402
@@ -93,7 +96,11 @@ _CHECK = """() => {
                                 .map(d => Math.round(d.getBoundingClientRect().left)));
   const images = Array.from(document.querySelectorAll('img')).map(img => {
     const a = img.closest('a[href]'); return a ? a.getAttribute('href') : null; });
-  return {problems, plots: plots.length, columns: columns.size, images};
+  // Each image's file, its own width and the width it is shown at: its text's size on screen (issue 61).
+  const sizes = Array.from(document.querySelectorAll('img')).map(img => {
+    const a = img.closest('a[href]');
+    return [a ? a.getAttribute('href') : null, img.naturalWidth, img.getBoundingClientRect().width]; });
+  return {problems, plots: plots.length, columns: columns.size, images, shown: sizes};
 }"""
 
 
@@ -186,6 +193,21 @@ def test_page_reads_at_800_and_1400_px(tab, name, written_page):
     for href in hrefs:
         assert (path.parent / unquote(html.unescape(href))).is_file(), href
     assert len(hrefs) == len(re.findall(r"<img\b", text))
+    # Every image's smallest text is 9 px tall on screen at both widths, and no PNG is wider than 1,700 px.
+    checked = 0
+    for width in WIDTHS:
+        for href, natural, shown in seen[width]["shown"]:
+            png = path.parent / unquote(html.unescape(href))
+            if png.suffix != ".png" or not png.with_suffix(".svg").is_file():
+                continue
+            legible = legibility(png)
+            assert natural <= MAX_PNG_PX, f"{name}: {href} is {natural} px wide"
+            if legible is not None:
+                assert legible.on_screen(shown) >= SCREEN_PX, (
+                    f"{name} at {width} px: {href} shown {shown:.0f} of {natural} px wide, its "
+                    f"{legible.points:g}-point {legible.text!r} {legible.on_screen(shown):.1f} px tall")
+                checked += 1
+    assert checked or name != "written"  # the written page shows its forest plot
 
 
 def test_the_written_page_lays_out_the_grid(written_page, tab):

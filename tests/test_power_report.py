@@ -77,46 +77,64 @@ def _power_rows():
             + _system(_inst("wecc", 2.0, n=29), zero=1.02, admm=((1, 1.015), (5, 1.01))))
 
 
+def _ladder(lines):
+    """The ladder's table: row label -> system -> cell."""
+    i = next(k for k, line in enumerate(lines) if line.startswith("| method |"))
+    systems = [c.strip() for c in lines[i].split("|")[2:-1]]
+    out = {}
+    for line in lines[i + 2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.split("|")[1:-1]]
+        out[cells[0]] = dict(zip(systems, cells[1:]))
+    return out
+
+
 def test_the_ladder_opens_the_answer_with_the_claim_checked_system_by_system():
+    from compare.report.answer import MAX_WORDS, words
+
     lines = _answer(_power_rows())
-    verdict = lines[0]
-    assert verdict == (
-        f"{CLAIM}, taken here as some design within 1 link (links counted between nodes) costing at most 5 % more "
-        "than LQR, holds on all 3 systems, trivially: with no link at all Decentralized (diagonal K) is already "
-        "within 5 % of LQR on each (+2 to +4.2 %); 1 link closes 0–25 % of the gap between the best design with no "
-        "link and LQR.")
-    assert lines[1] == ""
-    items = [x for x in lines if x.startswith("- ")]
-    assert len(items) == 3
-    # one item per system, named by what tells them apart; the ℓ1 paths at their best within each budget
-    first = items[0]
-    assert first.startswith("- ieee39 (damping = 2): with no link, Decentralized (diagonal K) +3.6 %; within 1 / 2 / "
-                            "5 links, above LQR: ")
-    assert "Sparse K (l1 ADMM) +3.6 / +3.6 / +2.1 %" in first  # its path jumps from 0 to 4 links
-    assert "Sparse delayed K (l1) +3.6 / +3.1 / +3.1 %" in first
+    assert lines[:3] == [
+        f"{CLAIM}, read as some design within 1 link costing at most 5 % more than LQR, holds on all 3 systems.",
+        "It holds without any link: Decentralized (diagonal K) is already +2 to +4.2 % above LQR on ieee39 (d = 2), "
+        "ieee39 (case damping) and wecc.",
+        "1 link closes 0–25 % of the gap between the best design with no link and LQR."]
+    assert all(words(x) <= MAX_WORDS for x in lines[:3]) and lines[3] == ""
+    # then a table, one column per system named by what tells them apart, not a list of long items
+    assert not any(x.startswith("- ") for x in lines)
+    table = _ladder(lines)
+    assert list(table["with no link: Decentralized (diagonal K)"]) == ["ieee39 (d = 2)", "ieee39 (case damping)", "wecc"]
+    assert table["with no link: Decentralized (diagonal K)"] == {"ieee39 (d = 2)": "+3.6", "ieee39 (case damping)": "+4.2",
+                                                                 "wecc": "+2"}
+    # the ℓ1 paths at their best within each budget: ADMM's path jumps from 0 to 4 links
+    assert table["Sparse K (l1 ADMM)"]["ieee39 (d = 2)"] == "+3.6 / +3.6 / +2.1"
+    assert table["Sparse delayed K (l1)"]["ieee39 (d = 2)"] == "+3.6 / +3.1 / +3.1"
     # SLS: only the complete graph is feasible here, so nothing within 1, 2 or 5 links; said why
-    assert "SLS none within 5 links (its sparsest design has 90 links)" in first
+    assert table["SLS"]["ieee39 (d = 2)"] == "none (sparsest: 90 links)"
     # GRNN-Sparse: no design within 1 or 2 links
-    assert "GRNN-Sparse none / none / +5 % (its sparsest design has 3 links)" in first
-    assert items[1].startswith("- ieee39 (damping = case): with no link, Decentralized (diagonal K) +4.2 %;")
-    assert items[2].startswith("- wecc: with no link, Decentralized (diagonal K) +2 %;")
-    assert "Sparse K (l1 ADMM) +1.5 / +1.5 / +1 %" in items[2]
+    assert table["GRNN-Sparse"]["ieee39 (d = 2)"] == "none / none / +5 (sparsest: 3 links)"
+    assert table["Sparse K (l1 ADMM)"]["wecc"] == "+1.5 / +1.5 / +1"
+    # the best of any method and the share of the gap closed: every number of the sentences is in the table
+    assert table["best of any method"]["wecc"] == "+1.5 / +1.5 / +1"
+    assert table["gap to LQR closed within 1 link"] == {"ieee39 (d = 2)": "0 %", "ieee39 (case damping)": "0 %",
+                                                        "wecc": "25 %"}
 
 
 def test_a_claim_that_fails_on_a_system_says_where_and_by_how_much():
     npcc = _inst("npcc", 2.0, n=48)
     rows = _power_rows() + _system(npcc, zero=1.2, admm=((1, 1.15), (5, 1.08)), delayed=((3, 1.1),),
                                    grnn=((2, 1.3),))
-    verdict = _answer(rows)[0]
-    assert ("holds on 3 of the 4 systems (ieee39 (damping = 2), ieee39 (damping = case) and wecc), "
-            "trivially: with no link at all Decentralized (diagonal K) is already within 5 % of LQR on each of "
-            "them (+2 to +4.2 %)") in verdict
-    assert "the best design within 1 link costs, above LQR: npcc +15 % (Sparse K (l1 ADMM))" in verdict
+    lines = _answer(rows)
+    assert lines[0].endswith("holds on 3 of the 4 systems.")
+    assert lines[1].endswith("already +2 to +4.2 % above LQR on ieee39 (d = 2), ieee39 (case damping) and wecc.")
+    assert lines[2].startswith("On npcc it fails: within 1 link the best design costs +15 % above LQR "
+                               "(Sparse K (l1 ADMM)), against +20 % with no link")
     # the claim is about the best design within the budget, whichever method found it, in the ladder or not
     rows.append(_rec(npcc, "truncated_lqr", "Truncated LQR K", 1.14, 1, params={"links": [1]}))
-    verdict = _answer(rows)[0]
-    assert "npcc +14 % (Truncated LQR K)" in verdict
-    assert "1 link closes 0–30 % of the gap" in verdict  # npcc: (1.2 - 1.14) / 0.2
+    lines = _answer(rows)
+    assert "+14 % above LQR (Truncated LQR K)" in lines[2]
+    assert "1 link closes 0–30 % of the gap" in lines[2]  # npcc: (1.2 - 1.14) / 0.2
+    assert _ladder(lines)["best of any method"]["npcc"] == "+14 / +14 / +8"
 
 
 def test_no_design_within_the_first_budget_is_none_with_the_sparsest_design_named():
@@ -124,29 +142,29 @@ def test_no_design_within_the_first_budget_is_none_with_the_sparsest_design_name
     rows = [r for r in _system(_inst("ieee39")) if r["method"] in ("lqr", "sls_topologies")]
     spec = SPEC.replace('"sparse_admm", "sparse_delayed", "sls_topologies", "grnn_sparse"', '"sls_topologies"')
     lines = _answer(rows, spec)
-    assert lines[0].endswith("holds on no system; ieee39 has no usable design within 1 link.")
-    assert lines[2] == ("- ieee39: no design with no link; within 1 / 2 / 5 links, above LQR: SLS none within 5 links "
-                        "(its sparsest design has 90 links).")
+    assert lines[0].endswith("holds on no system.") and lines[1] == "On ieee39 no usable design lies within 1 link."
+    table = _ladder(lines)
+    assert table["with no link"] == {"ieee39": "none"} and table["SLS"] == {"ieee39": "none (sparsest: 90 links)"}
 
 
 def test_a_method_with_no_usable_design_or_not_run_is_said_so():
     inst = _inst("ieee39")
     rows = [r for r in _system(inst) if r["method"] != "grnn_sparse"]
     rows = [r for r in rows if not (r["method"] == "sls_topologies" and r["params"]["graph"] == "complete")]
-    item = _answer(rows)[2]
-    assert "SLS no usable design (infeasible 1)" in item
-    assert "GRNN-Sparse not run" in item
+    table = _ladder(_answer(rows))
+    assert table["SLS"]["ieee39"] == "no usable design (infeasible 1)"
+    assert table["GRNN-Sparse"]["ieee39"] == "not run"
 
 
 def test_the_ladder_comes_first_and_the_other_sentences_follow_within_the_limit():
     rows = _power_rows()
     lines = _answer(rows)
-    sentences = [x for x in lines if x and not x.startswith("- ")]
+    sentences = lines[:lines.index("")]
     assert len(sentences) <= MAX_SENTENCES
     assert sentences[0].startswith(CLAIM)
     # a report without a ladder has none of it
     plain = answer_lines(Records.from_rows(rows), [], meta={"spec:power": SPEC.split("[report]")[0]})
-    assert not any(x.startswith("- ") or CLAIM in x for x in plain)
+    assert not any(x.startswith("|") or CLAIM in x for x in plain)
     assert answer_lines(Records.from_rows(rows), []) == []
 
 
@@ -160,15 +178,15 @@ def test_seeds_of_one_system_are_summarized_by_their_median():
     spec = ('name = "power"\n[instances]\nfamily = "chain"\n[[methods]]\nmethod = "lqr"\n[report]\n'
             'ladder = { methods = ["sparse_admm"] }\n')
     lines = _answer(rows, spec)
-    assert lines[0].startswith("Some design within 1 link (links counted between nodes) costs at most 5 % more "
-                               "than LQR on its one system")
-    assert lines[2] == ("- chain: with no link, Decentralized (diagonal K) +30 %; within 1 / 2 / 5 links, above LQR: "
-                        "Sparse K (l1 ADMM) +2 / +2 / +2 %.")
+    assert lines[0] == "Some design within 1 link costs at most 5 % more than LQR on its one system."
+    table = _ladder(lines)
+    assert table["with no link: Decentralized (diagonal K)"] == {"chain": "+30"}
+    assert table["Sparse K (l1 ADMM)"] == {"chain": "+2 / +2 / +2"}
 
 
 def test_systems_are_named_by_what_tells_them_apart():
     specs = {"a": _inst("ieee39", 2.0), "b": _inst("ieee39", "case"), "c": _inst("wecc", 2.0, n=29)}
-    assert system_names(specs) == {"a": "ieee39 (damping = 2)", "b": "ieee39 (damping = case)", "c": "wecc"}
+    assert system_names(specs) == {"a": "ieee39 (d = 2)", "b": "ieee39 (case damping)", "c": "wecc"}
 
 
 def test_the_ladder_table_keeps_infinite_costs_for_budgets_without_a_design():
@@ -212,7 +230,7 @@ def test_the_no_link_design_is_named_after_the_diagonal_gain_where_a_path_ends_o
     rows = _system(_inst("ieee39"))
     first = [r for r in rows if r["method"] == "decentralized"]
     rows = [r for r in rows if r["method"] != "decentralized"] + first  # a path's 0-link end comes first
-    assert "with no link, Decentralized (diagonal K) +3.6 %" in _answer(rows)[2]
+    assert _ladder(_answer(rows))["with no link: Decentralized (diagonal K)"] == {"ieee39": "+3.6"}
 
 
 def test_a_written_report_opens_with_the_ladder_and_a_rebuilt_one_says_the_same(tmp_path):
@@ -222,8 +240,8 @@ def test_a_written_report_opens_with_the_ladder_and_a_rebuilt_one_says_the_same(
     write_report(rows, tmp_path / "a", meta={"spec:power": SPEC}, title="power")
     text = (tmp_path / "a" / "report.md").read_text()
     head = text.split("## Findings")[0]
-    assert head.startswith(f"# power\n\n{CLAIM}, taken here as") and "\n\n- ieee39 (damping = 2): " in head
-    assert "<li>wecc: with no link" in (tmp_path / "a" / "report.html").read_text()
+    assert head.startswith(f"# power\n\n{CLAIM}, read as") and "| method | ieee39 (d = 2) |" in head
+    assert "<th>ieee39 (case damping)</th>" in (tmp_path / "a" / "report.html").read_text()
     # rebuilt from the folder alone (runs.csv, report.json with the stored spec), without a store
     import shutil
 

@@ -241,7 +241,8 @@ def test_off_scale_values_get_one_label_per_value_and_neighbours_go_a_row_lower(
     assert sorted(texts) == ["1e+26", "2.3", "3", "5"]
     assert texts["2.3"].get_color() == "0.25"  # shared by two methods
     assert texts["1e+26"].xyann[1] != texts["2.3"].xyann[1]  # same link count: stacked, not overlapping
-    assert texts["5"].xyann[1] == -4  # far from the others: first row
+    assert texts["5"].xyann[1] == 6  # far from the others: first row, above the frame where no line runs
+    assert all(t.get_va() == "bottom" and t.xyann[1] > 0 for t in texts.values())
     assert rows == 2
     # At the axes' edges a label extends inwards instead of past the frame.
     assert texts["5"].get_ha() == "right" and texts["2.3"].get_ha() == "left" and texts["3"].get_ha() == "center"

@@ -68,5 +68,5 @@ def test_a_pair_named_by_method_compares_each_of_its_labels(tmp_path):
                                        "--workers", "1", "--no-progress"])
     assert result.exit_code == 0, result.output
     report = (tmp_path / "out" / "report.md").read_text()
-    assert "| Sparse K at exact budgets (GraSP) − Sparse K (l1 ADMM) | instantaneous |" in report
-    assert "compare Budget, delayed and Sparse K (l1 ADMM)** (crosses models: delayed vs instantaneous)" in report
+    assert "### Sparse K at exact budgets (GraSP) against Sparse K (l1 ADMM), " in report
+    assert "| Budget, delayed − Sparse K (l1 ADMM)<br>information: delayed vs instantaneous |" in report

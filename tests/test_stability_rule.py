@@ -8,7 +8,7 @@ import pytest
 from baselines import decentralized, polish_gain
 from baselines._sparse import gain_design
 from baselines.sparse_delayed import delayed_gain_design as delayed_design
-from baselines.stabilizing import STABILITY_TOL, is_stable, local_starts
+from baselines.stabilizing import STABILITY_TOL, is_stable, local_starts, stability_tol
 from codesign import Instance, get_method, paper_instance, registered_methods, spectral_radius
 from codesign.status import DIVERGED, USABLE
 
@@ -25,6 +25,8 @@ STATIC = {
     "sparse_budget": [{"links": [12, 6, 2, 1, 0]}, {"links": [12, 6, 2, 1, 0], "info_model": "delayed"}],
     "best_pattern": [{"links": [0, 1, 2, 12]}, {"links": [0, 1, 2, 12], "info_model": "delayed"}],
     "sparse_delayed": [{}],
+    "refit": [{"graph": "0-1,1-2,3-0", "controller": "delayed"},
+              {"graph": "0-1,1-2,3-0", "controller": "instantaneous"}],
 }
 NOT_STATIC = {"autonomous", "sls", "sls_topologies", "sls_local"}
 
@@ -44,6 +46,11 @@ def test_the_rule_is_one_named_margin():
     assert STABILITY_TOL == 1e-6
     assert is_stable(1 - 2 * STABILITY_TOL) and not is_stable(1 - STABILITY_TOL) and not is_stable(1.0)
     assert not is_stable(float("nan")) and not is_stable(float("inf"))
+    # In the plant's own time it is the same margin wherever the plant has no slow mode
+    # (tests/test_stabilizing_search.py has the slow ones).
+    inst = unstable(1)
+    assert stability_tol(inst) == stability_tol() == STABILITY_TOL
+    assert is_stable(1 - 2 * STABILITY_TOL, inst) and not is_stable(1 - STABILITY_TOL, inst)
 
 
 def test_a_gain_within_the_margin_of_the_unit_circle_is_diverged():
@@ -103,7 +110,7 @@ def designs(request):
     found = {}
     for name, settings in STATIC.items():
         for params in settings:
-            found[(name, params.get("info_model", ""))] = get_method(name)(inst, **params)
+            found[(name, params.get("info_model", params.get("controller", "")))] = get_method(name)(inst, **params)
     return inst, found
 
 

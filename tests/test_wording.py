@@ -35,6 +35,22 @@ def _bullets(lines):
     return [line for line in lines if line.startswith("- ")]
 
 
+NB = "\u00a0"
+
+
+def _rows(lines, first="| first − second |"):
+    """Row label (its first line) -> column -> cell, of the table whose header starts with ``first``."""
+    i = next(k for k, line in enumerate(lines) if line.startswith(first))
+    header = [c.strip() for c in lines[i].split("|")[1:-1]]
+    out = {}
+    for line in lines[i + 2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.split("|")[1:-1]]
+        out[cells[0].split("<br>")[0]] = dict(zip(header[1:], cells[1:]))
+    return out
+
+
 def _pair(costs_a, costs_b):
     """GRNN-Sparse (a) against the delayed l1 gain (b) with any number of links: one comparison."""
     rows = []
@@ -48,15 +64,16 @@ def _pair(costs_a, costs_b):
 # --------------------------------------------------------------------------- equal and mixed
 
 
-def test_an_equal_cell_is_worded_equal_never_beats_nor_a_count_of_wins():
+def test_an_equal_cell_is_marked_equal_never_beats():
     base = [1.0 + 0.01 * s for s in range(10)]
     records, cell = _pair([c + 2e-6 for c in base], base)  # 10 of 10 by 2e-6: tested, but within the margin
     assert cell.verdict == "equal" and cell.tested
     lines = findings_markdown([cell])
-    (bullet,) = _bullets(lines)
-    assert bullet.startswith(f"- **{TANH} and {SD} are {EQUAL_WORDS}** (both delayed) overall: median ")
+    # a difference of 2e-6 prints at the precision the costs resolve: 0, never "+0.0000"
+    assert _rows(lines)[f"{TANH} − {SD}"] == {"any": f"0<br>[0, 0]<br>10/10{NB}="}
     assert EQUAL_WORDS == "equal within 0.1 % of LQR's cost"
-    assert "beats" not in bullet and "10 of 10" not in bullet and "costs more" not in bullet
+    assert f"=: {EQUAL_WORDS}" in next(line for line in lines if line.startswith("Each cell:"))
+    assert not _bullets(lines) and "▲" not in "\n".join(lines[:6])
     # drawn hollow, and the legend says what hollow means
     fig, axes = plot_forest([cell], {})
     (marker,) = [m for m in axes[0].lines if m.get_gid() == "forest-median"]
@@ -78,11 +95,12 @@ def test_a_mixed_cell_gives_both_the_typical_instance_and_the_median_costs():
     _, cell = _mixed()
     assert cell.verdict == "mixed" and not cell.significant
     assert cell.drawn_a > cell.drawn_b and cell.paired.median < 0
-    (bullet,) = _bullets(findings_markdown([cell]))
-    assert bullet.startswith(f"- **Mixed between {TANH} and {SD}** (both delayed) overall:")
-    assert f"{TANH} costs less on 10 of 12 instances (median paired difference {TANH} − Sparse delayed K −0.0020" \
-        in bullet
-    assert "yet Sparse delayed K has the lower median cost (1.0550 against 1.0730)" in bullet
+    lines = findings_markdown([cell])
+    assert _rows(lines)[f"{TANH} − {SD}"]["any"].endswith(f"10/12{NB}±")
+    (bullet,) = _bullets(lines)
+    assert bullet == (f"- **{TANH} − {SD}, mixed (±)**: on ‖A‖₂ = 1.05, with any number of links, {TANH} costs less "
+                      "on 10 of 12 instances (median −0.0020), yet Sparse delayed K has the lower median cost "
+                      "(1.0550 against 1.0730).")
     assert "beats" not in bullet
     fig, axes = plot_forest([cell], {})
     (marker,) = [m for m in axes[0].lines if m.get_gid() == "forest-median"]
@@ -93,22 +111,26 @@ def test_a_mixed_cell_gives_both_the_typical_instance_and_the_median_costs():
 def test_the_statistics_line_defines_equal_and_mixed_once_with_the_margin_and_why():
     _, cell = _mixed()
     statistics = findings_markdown([cell])[-2]
-    assert statistics.count(f"**{EQUAL_WORDS}**") == 1 and statistics.count("**mixed**") == 1
+    assert statistics.count(f"**{EQUAL_WORDS[0].upper() + EQUAL_WORDS[1:]}**") == 1
+    assert statistics.count("**Mixed**") == 1
     assert "third decimal" in statistics and "tolerances" in statistics and "standard errors" in statistics
-    assert "budget fronts" in statistics
+    assert "the figures draw" in statistics
 
 
-def test_a_mixed_cell_beside_a_claim_gets_a_sentence_of_its_own():
+def test_a_mixed_cell_beside_a_claim_gets_a_bullet_of_its_own():
     from dataclasses import replace
 
     _, mixed = _mixed()
     claim = replace(mixed, panel=("paper", 8, 1.2), paired=replace(mixed.paired, median=-0.01, low=-0.02,
                                                                    high=-0.005, a_wins=12, b_wins=0),
-                    drawn_a=1.0, drawn_b=1.1, p_holm=0.001)
+                    drawn_a=1.0, drawn_b=1.1, p_holm=0.001, differences=tuple(-0.01 - 0.001 * k for k in range(12)))
     assert claim.significant
-    (bullet,) = _bullets(findings_markdown([claim, mixed]))
-    assert bullet.startswith(f"- **{TANH} beats {SD}** (both delayed) overall on ‖A‖₂ = 1.2")
-    assert "Mixed overall on ‖A‖₂ = 1.05: GRNN-Sparse costs less on 10 of 12 instances" in bullet
+    lines = findings_markdown([claim, mixed])
+    detail = "\n".join(lines[lines.index("<!-- table: folded: the same, panel by panel -->"):])
+    assert f"| ‖A‖₂ = 1.2 | −0.010<br>[−0.020, −0.005]<br>12/12{NB}▼ |" in detail
+    (bullet,) = _bullets(lines)
+    assert bullet.startswith(f"- **{TANH} − {SD}, mixed (±)**: ")
+    assert f"on ‖A‖₂ = 1.05, with any number of links, {TANH} costs less on 10 of 12 instances" in bullet
 
 
 # --------------------------------------------------------------------------- notes and pair order
@@ -141,7 +163,7 @@ def test_the_plant_graph_note_is_printed_only_where_the_plant_graph_is_not_compl
     assert "The gap is what restricting communication to the plant graph costs." in text
 
 
-def test_a_cross_model_verdict_lists_the_models_in_the_order_it_names_the_designs():
+def test_a_cross_model_row_names_the_models_in_the_order_it_names_the_designs():
     rows = []
     for s in range(12):
         inst = _inst(s, n=20)
@@ -149,8 +171,9 @@ def test_a_cross_model_verdict_lists_the_models_in_the_order_it_names_the_design
                  _rec(inst, "grnn", "GRNN", 1.1 + 0.01 * s, links=100)]
     # table1 asks for ("gcnn", "grnn"): GCNN first, and GRNN wins
     comparisons = select_comparisons(Records.from_rows(rows), pairs=[("gcnn", "grnn")], budgets=(None,))
-    (bullet,) = _bullets(findings_markdown(comparisons))
-    assert bullet.startswith("- **GRNN beats GCNN** (crosses models: delayed vs instantaneous)")
+    lines = findings_markdown(comparisons)
+    assert "| GCNN − GRNN<br>information: instantaneous vs delayed |" in "\n".join(lines)
+    assert _rows(lines)["GCNN − GRNN"]["any"].endswith(f"12/12{NB}▲")  # GCNN costs more: GRNN beats it
 
 
 # --------------------------------------------------------------------------- exact counts and plurals
@@ -169,18 +192,17 @@ def test_unresolved_costs_are_counted_as_cell_instance_pairings_over_instances()
     assert changed == len(comparisons) > 1  # one instance, counted once per cell
     statistics = findings_markdown(comparisons, excluded_total=len(unresolved(records)), records=records)[-2]
     assert (f"1 unresolved simulated cost (standard error > 1 % of the cost) was dropped, changing {changed} "
-            "(cell, instance) pairings over 1 instance.") in statistics
+            "(panel, budget, instance) pairings over 1 instance.") in statistics
     assert "re-pairing" not in statistics
-    (bullet,) = _bullets(findings_markdown(comparisons))
-    assert "1 re-paired per cell" in bullet
+    assert not _bullets(findings_markdown(comparisons))  # said once, not per pair
 
 
 def test_counts_of_one_are_singular():
     records, cell = _pair([1.2], [1.1])
     lines = findings_markdown([cell])
     text = "\n".join(lines)
-    assert "1 instances" not in text and "K = 1 comparisons" not in text
-    assert "With at most 1 instance per cell" in text and "K = 1 comparison" in text
+    assert "1 instances" not in text and "K = 1 comparisons" not in text and "K = 1 tests" not in text
+    assert "with at most 1 instance per budget" in text and "K = 1 comparison" in text
     fig, axes = plot_forest([cell], {})
     assert axes[0].get_title().endswith("\n1 instance")
     plt.close(fig)

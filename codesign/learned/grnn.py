@@ -20,6 +20,7 @@ table of the training settings and their bounds.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
@@ -156,6 +157,7 @@ class _Job:
     settings: GRNNSettings
     params: dict
     start: Start | None = None  # with init != "random": the warm start (set by grnn_batch)
+    source: object = None  # with init "delayed": the delayed design the caller gives as the start
 
 
 def _parse(instance, kwargs: dict) -> _Job:
@@ -164,6 +166,7 @@ def _parse(instance, kwargs: dict) -> _Job:
     variant = kwargs.pop("variant", "given")
     beta = kwargs.pop("beta", None)
     seed = kwargs.pop("seed", 0)
+    source = kwargs.pop("start", None)
     if variant not in VARIANTS:
         raise ValueError(f"variant must be one of {VARIANTS}, got {variant!r}")
     if variant == "sparse":
@@ -175,13 +178,38 @@ def _parse(instance, kwargs: dict) -> _Job:
     SEED.check(seed, "seed")
     settings = GRNNSettings.parse(kwargs, "GRNN")
     check_warm_settings(settings, variant, instance)
+    if source is not None and settings.init != "delayed":
+        raise ValueError(f"start (a delayed design to start from) needs init 'delayed', got init {settings.init!r}")
     resolve_engine(settings.engine, unsupported=fused_unsupported(  # fails now, not after training
         states_per_node=node_width(instance.state_nodes), inputs_per_node=node_width(instance.input_nodes),
         readout=settings.readout))
     params = {"variant": variant, "seed": int(seed), **dict(sorted(settings.changed().items()))}
     if beta is not None:
         params["beta"] = float(beta)
-    return _Job(instance, variant, None if beta is None else float(beta), int(seed), settings, params)
+    return _Job(instance, variant, None if beta is None else float(beta), int(seed), settings, params, source=source)
+
+
+def check_settings(params: dict, *, variant: str = "given") -> None:
+    """ValueError for GRNN settings that are each valid but not together, without an instance.
+
+    What :func:`_parse` refuses before any training that needs no instance: a warm start
+    the variant or readout cannot take (:func:`~codesign.learned.warm.check_warm_settings`)
+    and the fused engine with a per-node readout. Each GRNN method registers it as its
+    ``check`` (:class:`codesign.methods.Method`), so that a spec asking for these is refused
+    when it is loaded, not stored as a ``failed`` run that a rerun never retries.
+
+    Parameters
+    ----------
+    params : dict
+        One run's hyperparameters (keys that are not :class:`GRNNSettings` fields, such as
+        ``beta`` and ``seed``, are checked elsewhere).
+    variant : str
+        The variant the method binds.
+    """
+    fields = {f.name for f in dataclasses.fields(GRNNSettings)}
+    settings = GRNNSettings.parse({k: v for k, v in params.items() if k in fields}, "GRNN")
+    check_warm_settings(settings, variant)
+    resolve_engine(settings.engine, unsupported=fused_unsupported(readout=settings.readout))
 
 
 #: The l1 weights the paper used for Table 1, by ||A||.
@@ -312,7 +340,7 @@ def _warm_starts(parsed: list[_Job]) -> None:
     for job in parsed:
         if job.settings.init != "random":
             t0 = time.perf_counter()
-            job.start = build_start(cache, job.instance, job.settings, job.variant, job.beta)
+            job.start = build_start(cache, job.instance, job.settings, job.variant, job.beta, source=job.source)
             job.start.extras["init_seconds"] = time.perf_counter() - t0  # 0 where the source was computed already
 
 
@@ -323,7 +351,9 @@ def grnn_batch(jobs, *, stack_size: int = 128) -> list[Design]:
     ----------
     jobs : iterable of (Instance, dict)
         Each dict holds :func:`grnn`'s keyword arguments (``variant``, ``beta``,
-        ``seed`` and any field of :class:`GRNNSettings`). Jobs with the same
+        ``seed`` and any field of :class:`GRNNSettings`; ``start``, with ``init =
+        "delayed"``, a delayed static design to start from instead of the variant's
+        own, as :func:`baselines.refit` gives its refitted gain). Jobs with the same
         loop settings (steps, batch, horizon, dtype, ...) share stacks of up to
         ``stack_size`` models: ensemble members, variants, instances and the
         sparse variant's l1 stage all train side by side, then all refinements.
@@ -432,7 +462,11 @@ def _finish_warm(job: _Job, first, chosen, refined, seconds) -> Design:
             return Design.failure(method, job.params, DIVERGED, "; ".join([failure] + notes), info_model="delayed",
                                   seconds=seconds, extras=extras)
         extras["curve"] = curve(result)
-        return _scored(job, method, trained, seconds, extras, "; ".join(notes + members))
+        design = _scored(job, method, trained, seconds, extras, "; ".join(notes + members))
+        chain = "; ".join(notes)
+        if design.status == DIVERGED and chain not in design.message:  # a simulated failure says the rollout's only
+            design = dataclasses.replace(design, message="; ".join([design.message, chain]))
+        return design
 
     # The embedded design itself: every member starts at its closed loop (what they add is unread).
     start_params = dict(S=start.S, F=start.F, W=start.W, G=start.G)
@@ -585,4 +619,5 @@ for _name, _variant, _label, _summary in (
            max_states=MAX_STATES[_variant], max_states_reason=_MAX_STATES_REASONS[_variant],
            size_limit=_sparse_limit if _variant == "sparse" else _blocks_limit,
            produces=("training_curve", "topology_path") if _variant == "sparse" else ("training_curve",),
-           path_param="beta" if _variant == "sparse" else None)(grnn)
+           path_param="beta" if _variant == "sparse" else None,
+           check=functools.partial(check_settings, variant=_variant))(grnn)

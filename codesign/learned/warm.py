@@ -70,8 +70,19 @@ def delayed_gamma(instance, beta: float) -> float:
     return float(beta) / instance.trace_P
 
 
-def check_warm_settings(settings, variant: str, instance) -> None:
-    """One-line ValueError for a warm start the run cannot take, before any training."""
+def check_warm_settings(settings, variant: str, instance=None) -> None:
+    """One-line ValueError for a warm start the run cannot take, before any training.
+
+    Parameters
+    ----------
+    settings : GRNNSettings
+    variant : str
+        The GRNN variant (``"given"``, ``"dense"``, ``"fixed"``, ``"sparse"``).
+    instance : Instance, optional
+        None checks the settings alone (what a spec can be refused for when it is loaded,
+        before any instance exists); with the instance, also ``hidden`` against its
+        states per node.
+    """
     init = settings.init
     if init == "random":
         if settings.init_scale != type(settings).init_scale:
@@ -86,6 +97,8 @@ def check_warm_settings(settings, variant: str, instance) -> None:
     if init == "delayed" and variant == "sparse" and settings.l1_hops is not None:
         raise ValueError("init 'delayed' needs l1_hops None: the delayed path's links are not limited to "
                          "the l1 stage's hops")
+    if instance is None:
+        return
     p = node_width(instance.state_nodes)
     if settings.hidden < 2 * p:
         raise ValueError(f"init {init!r} needs hidden >= {2 * p} (2 features per state of a node, "
@@ -214,8 +227,13 @@ def _source(cache: StartCache, instance, init: str, variant: str, beta):
     return cache.delayed_given(instance), "sparse_delayed on the given graph", {}
 
 
-def build_start(cache: StartCache, instance, settings, variant: str, beta) -> Start:
-    """The run's :class:`Start`: its source computed (once per instance in ``cache``) and embedded."""
+def build_start(cache: StartCache, instance, settings, variant: str, beta, source=None) -> Start:
+    """The run's :class:`Start`: its source computed (once per instance in ``cache``) and embedded.
+
+    ``source``: with ``init = "delayed"``, the delayed design to start from, given by the
+    caller (a method of the method layer that found it, such as :func:`baselines.refit`)
+    instead of the one the variant's rule computes.
+    """
     from ..evaluation import exact_cost
     from .embedding import embed_delayed_gain
 
@@ -226,7 +244,10 @@ def build_start(cache: StartCache, instance, settings, variant: str, beta) -> St
         notes.append(f"init auto: open-loop spectral radius {radius:.4g} {'>' if init == 'diagonal' else '<='} "
                      f"{AUTO_RADIUS:g}, so {_LABELS.get(init, 'the random initialization')}")
     while init != "random":
-        design, name, extras = _source(cache, instance, init, variant, beta)
+        if source is not None and init == "delayed":
+            design, name, extras = source, "the given delayed design", {}
+        else:
+            design, name, extras = _source(cache, instance, init, variant, beta)
         if not _usable(design):
             why = (getattr(design, "message", "") or getattr(design, "status", "")) if design is not None else ""
             reason = f"{name} gave no usable design" + (f" ({why})" if why else "")

@@ -1,17 +1,20 @@
-"""The report's answer, first: at most three sentences between the title and the Findings.
+"""The report's answer, first: three sentences at most between the title and the Findings.
 
-The sentences are chosen by rules, in this order (docs/reports.md, "The answer"):
+Each sentence has at most :data:`MAX_WORDS` words, states the largest effect first and
+where an effect changes sign or size across link budgets says at which; every number in
+it is one a table of the page gives. The sentences are chosen by rules, in this order
+(docs/reports.md, "The answer"):
 
 (0) **Budget ladder.** Where an experiment's spec asks for one (``[report] ladder``,
     :mod:`compare.report.ladder`): whether some design within its first link budget comes within
-    ``near`` % of LQR on each system, then a list, one item per system, of each method's
-    best cost within every budget (the list is not counted among the sentences).
+    ``near`` % of LQR, system by system, and where not by how much; then a table, one column per
+    system, of each method's best cost within every budget (the table is not a sentence).
 (0') **Decomposition.** Where the records hold the paper's GRNN-Sparse, the per-node one
-    from random weights and the per-node one warm-started from the delayed ℓ1 path beside the
-    delayed static designs (:mod:`compare.report.decomposition`): the excess of the paper's design
-    over the best delayed static design split into model class and training, with intervals;
-    divergence with and without the warm start on the system with the largest open-loop
-    spectral radius; and whether the nonlinearity adds anything at equal information and links.
+    from random weights and the per-node one warm-started from a delayed static design beside
+    the delayed static designs (:mod:`compare.report.decomposition`): the excess of the paper's design
+    over the best delayed static design at the budget where it is largest, its parts with any
+    number of links, and divergence with and without the warm start on the system with the
+    largest open-loop spectral radius.
 (a) **Failures.** A method that diverges or fails (:data:`codesign.status.DIVERGED`,
     :data:`~codesign.status.FAILED`) on at least half of a panel's instances, or whose
     median best cost there is above :data:`FAILURE_COST` × LQR, while another design
@@ -20,26 +23,21 @@ The sentences are chosen by rules, in this order (docs/reports.md, "The answer")
     with no solution, such as SLS on a communication graph that is not quadratically
     invariant), nor is the autonomous loop (u = 0), the reference for how hard a panel is.
 (b) **Reproduction.** A report with the paper's Table 1 (an experiment asks for its
-    section): how many paper values lie inside our 95 % intervals, each one outside
-    with its distance in standard errors of the difference, and the known reasons
-    (:data:`compare.report.learning_report.GAP_REASONS`, docs/reproduction.md).
-(c) **Pooled results.** A pair of designs whose cells, at one link budget, are each too
-    small to test (too few instances for an interval, or no sign test on so few can pass
-    Holm's correction) but in which every instance of every panel favours the same
-    design: the panels are pooled with a stratified sign test (wins counted per panel,
-    summed; under no difference each instance is a fair coin, so the total is binomial),
-    Holm-adjusted over every pooled test, and the sentence says it is pooled.
-(e) **Otherwise the strongest same-information claim**: of the pairs with the same
-    information model, the one that "beats" in the most cells (then the earlier group,
-    then the one whose weakest interval lies farthest from 0).
-(d) **Difficulty.** Beside the gaps the sentence of (c) or (e) states, where the panels
-    it spans differ in how hard the problem is, by a factor of :data:`DIFFICULTY_RATIO`
-    or more in what doing nothing (u = 0) costs over LQR: u = 0's cost at the easiest and
-    hardest of them, and the gap at each.
+    section): how many paper values lie inside our 95 % intervals or within 2 standard
+    errors, those beyond with their distance in standard errors and what is known of why, and
+    the largest gap.
+(c) **The result.** Of the findings table's rows (pooled over panels,
+    :func:`compare.report.findings.pooled_rows`), the pair that beats at the most budgets
+    (then the same information model before crossing models, then the Findings' order):
+    where it holds, its largest difference first and its smallest, and the budgets where
+    the verdict differs. Then either how it holds panel by panel (where a panel's test can
+    pass Holm's correction), or the other pairs against the same design that go the same way.
+(d) **Difficulty.** Beside the result, where its panels (each one system) differ by a
+    factor of :data:`DIFFICULTY_RATIO` or more in what doing nothing (u = 0) costs over LQR:
+    that cost on the easiest and hardest of them, and the result's gap on each.
 
-Rules (0), (0') and (a) to (c) each add their sentences ((c) not beside (0')), (e) only where none of (0),
-(0'), (b) and (c) did, and
-(d) follows the result of (c) or (e) it qualifies; the first :data:`MAX_SENTENCES` are kept.
+Rules (0), (0') and (a) to (c) each add their sentences ((c) only where neither (0) nor
+(0') nor (b) did), (d) follows (c); the first :data:`MAX_SENTENCES` are kept.
 """
 
 from __future__ import annotations
@@ -51,16 +49,18 @@ import numpy as np
 
 from codesign.status import DIVERGED, FAILED
 
-from ..run.records import Records, as_records
+from ..run.records import Records, as_records, canonical_key
 from .decomposition import decomposition_sentences
-from .findings import ALPHA, BOUND_LABEL, Comparison, budgets_per_node, holm, sign_test
+from .findings import BOUND_LABEL, Comparison, Pooled, budgets_per_node, pooled_rows
 from .ladder import ladder_lines
 from .names import join_words, short_names
 
-__all__ = ["answer_lines", "MAX_SENTENCES", "FAILURE_COST", "DIFFICULTY_RATIO", "pooled_tests", "Pooled"]
+__all__ = ["answer_lines", "MAX_SENTENCES", "MAX_WORDS", "FAILURE_COST", "DIFFICULTY_RATIO", "words"]
 
 #: At most this many sentences.
 MAX_SENTENCES = 3
+#: At most this many words in a sentence (:func:`words`).
+MAX_WORDS = 40
 #: A method whose median best cost on a panel is above this many times LQR's fails there in effect.
 FAILURE_COST = 10.0
 #: Panels differ in difficulty when u = 0's excess cost over LQR differs by this factor or more.
@@ -69,6 +69,13 @@ DIFFICULTY_RATIO = 2.0
 _LEARNED = ("grnn", "grnn_sparse", "grnn_dense", "grnn_fixed", "gcnn")
 _NOTHING = "autonomous"
 _VERBS = {DIVERGED: ("diverges", "diverge"), FAILED: ("fails", "fail")}
+#: Spec keys that tell no two systems apart (:mod:`compare.report.ladder`'s rule).
+_NOT_SYSTEM = ("seed", "sha256")
+
+
+def words(text: str) -> int:
+    """Words as the limits count them: whitespace-separated tokens with a letter or a digit."""
+    return sum(1 for w in text.split() if any(ch.isalnum() for ch in w))
 
 
 # --------------------------------------------------------------------------- wording
@@ -97,16 +104,6 @@ def _excess(cost: float) -> str:
         return _times(cost)
     pct = 100 * (cost - 1)
     return f"+{pct:.0f} %" if pct >= 10 else f"+{pct:.2g} %"
-
-
-def _p(p: float) -> str:
-    """"8e-6", "0.0002", "0.062": one significant digit below 0.01, two above."""
-    return (f"{p:.1g}" if p < 0.01 else f"{p:.2g}").replace("e-0", "e-")
-
-
-def _approx(p: float) -> str:
-    """"≈ 8e-06" for a rounded small p, "= 0.062" otherwise."""
-    return f"≈ {_p(p)}" if p < 0.01 else f"= {_p(p)}"
 
 
 # --------------------------------------------------------------------------- (a) failures
@@ -188,13 +185,25 @@ def _panel_order(panel: tuple) -> tuple:
     return (str(family), n, -math.inf if a_norm is None else a_norm)
 
 
+
+
 # --------------------------------------------------------------------------- (b) reproduction
 
 
+def _reason(method: str) -> str:
+    """What is known of why a paper value lies beyond the noise, in a few words (the full reason is in the
+    Table 1 section and docs/reproduction.md)."""
+    from .learning_report import GAP_REASONS
+
+    reason = GAP_REASONS.get(method, "")
+    return reason.split(" (")[0] if reason else "no known cause"
+
+
 def reproduction_sentences(records, meta=None, members=None) -> list[str]:
-    """Rule (b): the paper's Table 1 values against our intervals, those outside with their distance, and why."""
+    """Rule (b): the paper's Table 1 values against our intervals, those beyond the noise with their distance and
+    what is known of why, and the largest gap."""
     from ..run.meta import StoreMeta
-    from .learning_report import GAP_REASONS, paper_values
+    from .learning_report import paper_values
     from .sections import experiments_with
 
     if meta is None:
@@ -208,213 +217,46 @@ def reproduction_sentences(records, meta=None, members=None) -> list[str]:
     noise = [v for v in outside if v.within_noise]
     beyond = sorted((v for v in outside if not v.within_noise), key=lambda v: -abs(v.z))
     several = len({v.a_norm for v in values}) > 1
-    first = [True]
-
-    def at(vs) -> str:
-        """"GRNN-Dense at ‖A‖₂ = 1.05 (1.9 SE) and 0.995 (1.7 SE)": one label's values, farthest first."""
-        parts = []
-        for v in sorted(vs, key=lambda v: -abs(v.z)):
-            where = (f"‖A‖₂ = {v.a_norm:g} " if first[0] else f"{v.a_norm:g} ") if several else ""
-            first[0] = False
-            parts.append(f"{where}({abs(v.z):.1f} SE)")
-        return f"{vs[0].label} at {join_words(parts)}" if several else f"{vs[0].label} {join_words(parts)}"
-
-    def by_label(vs) -> list[str]:
-        groups: dict[str, list] = {}
-        for v in sorted(vs, key=lambda v: -abs(v.z)):
-            groups.setdefault(v.label, []).append(v)
-        return [at(g) for g in groups.values()]
-
     agree = inside + len(noise)
     head = (f"Paper Table 1 is reproduced within instance-sampling noise for {agree} of its {len(values)} values: "
             f"{inside} lie inside our 95 % intervals")
     if not outside:
         return [head + "."]
     if noise:
-        head += (f", and of the {len(outside)} outside, {join_words(by_label(noise))} "
-                 f"{'is' if len(noise) == 1 else 'are'} under 2 SE off")
-    else:
-        head += f", and {len(outside)} lie outside"
-    sentences = [head + " (SE: standard errors of the difference between our statistic and the paper's, two "
-                 "statistics over independent draws of instances)."]
+        head += (f" and {len(noise)} within 2 standard errors (SE) of the difference between our statistic and the "
+                 "paper's")
+    sentences = [head + "."]
     if not beyond:
         return sentences
-    reasons: dict[str, list] = {}
+    first = [True]
+
+    def where(v) -> str:
+        if not several:
+            return ""
+        text = f" at ‖A‖₂ = {v.a_norm:g}" if first[0] else f" at {v.a_norm:g}"
+        first[0] = False
+        return text
+
+    groups: dict[str, list] = {}
     for v in beyond:
-        reasons.setdefault(GAP_REASONS.get(v.method, ""), []).append(v)
+        groups.setdefault(_reason(v.method), []).append(v)
     parts = []
-    for reason, vs in reasons.items():
-        if reason:
-            parts.append(f"{join_words(by_label(vs))}, {reason}")
-    if "" in reasons:
-        parts.append(f"{join_words(by_label(reasons['']))}, with no known cause")
+    for reason, vs in groups.items():
+        items = [f"{v.label}{where(v)} ({abs(v.z):.1f} SE)" for v in vs]
+        parts.append(f"{join_words(items)}, {reason}")
+    unit = "" if noise else " standard errors (SE) of the difference"
+    text = f"Beyond that noise lie {'; '.join(parts)}."
+    if unit:
+        text = text.replace(" SE)", " SE)", 1)
+    sentences.append(text)
     top = beyond[0]
-    sentences.append(f"Beyond that noise: {'; '.join(parts)} (docs/reproduction.md); the largest gap, "
-                     f"{top.label} at ‖A‖₂ = {top.a_norm:g}, is our {top.statistic} {top.ours:.3f} against the "
-                     f"paper's {top.paper:.3f}.")
+    sentences.append(f"The largest gap, {top.label}{' at ‖A‖₂ = ' + format(top.a_norm, 'g') if several else ''}, "
+                     f"is our {top.statistic} {top.ours:.3f} against the paper's {top.paper:.3f} "
+                     "(docs/reproduction.md).")
     return sentences
 
 
-def _number(k: int) -> str:
-    return ("No", "One", "Two", "Three", "Four", "Five", "Six", "Seven", "Eight", "Nine")[k] if k < 10 else str(k)
-
-
-# --------------------------------------------------------------------------- (c) pooled
-
-
-class Pooled(tuple):
-    """A pooled test: (cells, a_wins, b_wins, instances, p, p_holm) of one pair at one budget tier."""
-
-    __slots__ = ()
-
-    def __new__(cls, cells, a_wins, b_wins, instances, p, p_holm=1.0):
-        return super().__new__(cls, (tuple(cells), a_wins, b_wins, instances, p, p_holm))
-
-    cells = property(lambda self: self[0])
-    a_wins = property(lambda self: self[1])
-    b_wins = property(lambda self: self[2])
-    instances = property(lambda self: self[3])
-    p = property(lambda self: self[4])
-    p_holm = property(lambda self: self[5])
-
-    @property
-    def unanimous(self) -> bool:
-        """Every instance of every panel favours the same design (no tie)."""
-        return self.instances > 0 and max(self.a_wins, self.b_wins) == self.instances
-
-
-def _untestable(c: Comparison) -> bool:
-    """Too small to test alone: too few instances for an interval, or not tested after Holm, and not equal."""
-    return not c.equal and not c.tested and not c.mixed
-
-
-def pooled_tests(comparisons: Sequence[Comparison]) -> list[Pooled]:
-    """Every (pair, budget tier) whose cells span two panels or more and are each too small to test: their wins
-    pooled over the panels (stratified sign test), Holm-adjusted over these pooled tests."""
-    per_node = budgets_per_node(comparisons)
-    groups: dict[tuple, list] = {}
-    for c in comparisons:
-        groups.setdefault((c.group, c.a, c.b, c.budget_tier(per_node)), []).append(c)
-    tests = []
-    for cells in groups.values():
-        if len({c.panel for c in cells}) < 2 or not all(_untestable(c) for c in cells):
-            continue
-        a_wins = sum(c.paired.a_wins for c in cells)
-        b_wins = sum(c.paired.b_wins for c in cells)
-        n = sum(c.paired.instances for c in cells)
-        tests.append(Pooled(cells, a_wins, b_wins, n, sign_test(a_wins, b_wins)))
-    adjusted = holm([t.p for t in tests])
-    return [Pooled(t.cells, t.a_wins, t.b_wins, t.instances, t.p, q) for t, q in zip(tests, adjusted)]
-
-
-def _tier_phrase(c: Comparison, per_node: bool) -> str:
-    tier = c.budget_tier(per_node)
-    if tier is None:
-        return "with any number of links"
-    unit = "link" if tier == 1 else "links"
-    return f"within {tier:g} {unit}{' per node' if per_node else ''}"
-
-
-def _subject(label: str, names: Mapping) -> str:
-    return f"the {label}" if label == BOUND_LABEL else names.get(label, label)
-
-
-def pooled_sentence(comparisons: Sequence[Comparison], order: Mapping,
-                    flagged: set = frozenset()) -> tuple[str, list[Comparison]] | None:
-    """Rule (c): the strongest unanimous pooled result, and the pairs that share it; with the cells it rests on.
-
-    A pool with a side that rule (a) stated as failing on one of its panels is left out.
-    """
-    def clean(t: Pooled) -> bool:
-        return not any((c.panel, x) in flagged for c in t.cells for x in (c.a, c.b))
-
-    tests_all = pooled_tests(comparisons)
-    tests = [t for t in tests_all if t.unanimous and clean(t)]
-    if not tests:
-        return None
-    per_node = budgets_per_node(comparisons)
-
-    def rank(t: Pooled):
-        c = t.cells[0]
-        tier = c.budget_tier(per_node)
-        return (t.p_holm >= ALPHA, order[(c.group, c.a, c.b)], -t.instances, tier is not None,
-                math.inf if tier is None else tier)
-
-    best = min(tests, key=rank)
-    c0 = best.cells[0]
-    short = short_names({c.a for c in comparisons} | {c.b for c in comparisons})
-    a_side = best.a_wins == best.instances  # a costs less on every instance
-    subject, other, word = c0.a, c0.b, "less" if a_side else "more"
-    panels = sorted({c.panel for c in best.cells}, key=_panel_order)
-    sizes = sorted({c.paired.instances for c in best.cells})
-    each = f"{sizes[0]}" if len(sizes) == 1 else f"{sizes[0]}–{sizes[-1]}"
-    tier = _tier_phrase(c0, per_node)
-    significant = best.p_holm < ALPHA
-    k = len(tests_all)
-    why = "too few for an interval" if all(c.too_few for c in best.cells) else "too few for a claim"
-    text = (f"Pooled over its {len(panels)} panels ({each} instance{'' if sizes[-1] == 1 else 's'} each, {why} "
-            f"one by one), {_subject(subject, short)} costs {word} than {_subject(other, short)} on "
-            f"{best.instances} of {best.instances} instances {tier} (stratified sign test p {_approx(best.p)}, "
-            f"Holm-adjusted over {k} pooled test{'' if k == 1 else 's'} p {_approx(best.p_holm)}"
-            + ("" if significant else ": not significant even pooled") + ")")
-    # Other pairs with the same second design, tier and direction, as strong: "so do …".
-    also = []
-    if significant:
-        for t in sorted(tests, key=rank):
-            c = t.cells[0]
-            if t is best or t.p_holm >= ALPHA or c.b != c0.b or c.budget_tier(per_node) != c0.budget_tier(per_node):
-                continue
-            if (t.a_wins == t.instances) != a_side or c.a == c0.a:
-                continue
-            also.append(f"{_subject(c.a, short)} ({t.instances} of {t.instances})")
-    if also:
-        text += f"; so {'does' if len(also) == 1 else 'do'} {join_words(also[:3])}"
-    return text + ".", list(best.cells)
-
-
-# --------------------------------------------------------------------------- (e) strongest claim
-
-
-def claim_sentence(comparisons: Sequence[Comparison], order: Mapping, names: Mapping) -> tuple[str, list] | None:
-    """Rule (e): the same-information pair that beats in the most cells, said briefly."""
-    from .findings_text import (
-        models_text,
-        range_text,
-        scope_text,
-        short_label,
-        side_of,
-        with_article,
-    )
-
-    pairs: dict[tuple, list] = {}
-    for c in comparisons:
-        if c.relation == "same":
-            pairs.setdefault((c.group, c.a, c.b), []).append(c)
-    best, best_key = None, None
-    for key, cells in pairs.items():
-        claims = [c for c in cells if c.significant]
-        if not claims:
-            continue
-        votes = [side_of(c) for c in claims]
-        side = -1 if votes.count(-1) > votes.count(1) else 1
-        lead = [c for c in claims if side_of(c) == side]
-        weakest = min(min(abs(c.paired.low), abs(c.paired.high)) for c in lead)
-        rank = (-len(lead), _group_rank(key[0]), order[key], -weakest)
-        if best_key is None or rank < best_key:
-            best, best_key = (cells, lead, side), rank
-    if best is None:
-        return None
-    cells, lead, side = best
-    c0 = lead[0]
-    winner, loser = (c0.a, c0.b) if side < 0 else (c0.b, c0.a)
-    beaten_by_bound = c0.b == BOUND_LABEL and side > 0
-    verdict = f"{c0.a} is beaten by the {c0.b}" if beaten_by_bound else f"{with_article(winner)} beats {with_article(loser)}"
-    models = models_text(c0, c0.a if beaten_by_bound else winner)
-    holm_p = max(c.p_holm for c in lead)
-    text = (f"{verdict} {models} {scope_text(lead, cells, names)}: {short_label(loser, winner)} costs "
-            f"{range_text([side * c.paired.median for c in lead])} more per instance (median paired difference, "
-            f"{'each' if len(lead) > 1 else 'its'} 95 % interval excluding 0; Holm p ≤ {_p(holm_p)}).")
-    return text[0].upper() + text[1:], lead
+# --------------------------------------------------------------------------- (c) the result
 
 
 def _group_rank(group: str) -> int:
@@ -423,25 +265,223 @@ def _group_rank(group: str) -> int:
     return 1 if "bound" in group else 2
 
 
+def _level(x) -> str:
+    from .findings_text import evidence_level as level
+
+    return level(x)
+
+
+def _side(x) -> int:
+    return -1 if x.paired.median < 0 else 1
+
+
+def _tiers_phrase(tiers: Sequence, per_node: bool) -> str:
+    """"within 20 and 60 links", "within 60 links and with any number", "with any number of links"."""
+    finite = [t for t in tiers if t is not None]
+    unit = "link" if finite == [1] else "links"
+    text = (f"within {join_words([f'{t:g}' for t in finite])} {unit}{' per node' if per_node else ''}"
+            if finite else "")
+    if None in tiers:
+        text += " and with any number" if text else "with any number of links"
+    return text
+
+
+def _tier(t, per_node: bool) -> str:
+    from .findings_text import tier_phrase as phrase
+
+    return phrase(t, per_node)
+
+
+_OTHER_WORDS = {"unclear": "no clear difference", "few": "too few instances", "equal": "equal within 0.1 % of LQR",
+                "mixed": "mixed", "direction": "the same way, not significant"}
+
+
+def _median_text(x) -> str:
+    """The median as the tables print it (at the precision its interval supports)."""
+    from .findings_text import estimate_text
+
+    return estimate_text(x.paired).split(" [")[0]
+
+
+def _pair_key(x) -> tuple:
+    return (x.group, x.a, x.b)
+
+
+def _rank(rows: Sequence[Pooled], order: Mapping) -> tuple:
+    """Pairs with a claim first, then the same information model before crossing models, then more budgets
+    beaten, the delayed comparisons before those against the bound, more budgets with a direction, the Findings'
+    order."""
+    levels = [_level(r) for r in rows]
+    r0 = rows[0]
+    return ("beats" not in levels, r0.relation != "same", -levels.count("beats"), _group_rank(r0.group),
+            -levels.count("direction"), order[_pair_key(r0)])
+
+
+def _result(rows: Sequence[Pooled], flagged: set, short: Mapping) -> tuple | None:
+    """The pair the answer states: (its rows, the lead level, the lead side), or None where no pair has a tested
+    direction."""
+    pairs: dict[tuple, list] = {}
+    for r in rows:
+        pairs.setdefault(_pair_key(r), []).append(r)
+    order = {key: i for i, key in enumerate(pairs)}
+    candidates = [rs for rs in pairs.values() if any(_level(r) in ("beats", "direction") for r in rs)]
+    if not candidates:
+        return None
+    best = min(candidates, key=lambda rs: _rank(rs, order))
+    levels = [_level(r) for r in best]
+    lead_level = "beats" if "beats" in levels else "direction"
+    votes = [_side(r) for r, lv in zip(best, levels) if lv == lead_level]
+    side = -1 if votes.count(-1) > votes.count(1) else 1
+    return best, lead_level, side
+
+
+def _names(a: str, b: str, short: Mapping, side: int) -> tuple[str, str]:
+    """(winner, loser) as a sentence names them."""
+    winner, loser = (a, b) if side < 0 else (b, a)
+    name = lambda x: f"the {x}" if x == BOUND_LABEL else short.get(x, x)  # noqa: E731
+    return name(winner), name(loser)
+
+
+def result_sentence(rows: Sequence[Pooled], level: str, side: int, short: Mapping, per_node: bool,
+                    panels: int, _every: bool = False) -> str:
+    """"Pooled over its 5 panels, W beats L at every budget: L costs +x [..] × LQR more within 20 links, +y [..]
+    with any number of links; within …: no clear difference."."""
+    lead = [r for r in rows if _level(r) == level and _side(r) == side]
+    rest = [r for r in rows if r not in lead]
+    winner, loser = _names(rows[0].a, rows[0].b, short, side)
+    pooled = len({c.panel for r in rows for c in r.cells})
+    head = "" if pooled < 2 else (f"Pooled over its {panels} panels, " if pooled == panels
+                                  else f"Pooled over {pooled} of its {panels} panels, ")
+    where = "at every budget" if not rest and len(lead) > 1 else _tiers_phrase([r.tier for r in lead], per_node)
+    if _every:  # too long: the budgets are left to the table, the largest and smallest difference say where
+        where = "at some budgets"
+    big = max(lead, key=lambda r: abs(r.paired.median))
+    small = min(lead, key=lambda r: abs(r.paired.median))
+    if level == "beats":
+        text = f"{head}{winner} beats {loser} {where}: {loser} costs {_signed(big, side)} × LQR more"
+    else:
+        text = (f"{head}{loser} costs more than {winner} {where} (not significant after Holm's correction): "
+                f"{_signed(big, side)} × LQR")
+    if len(lead) > 1:
+        text += f" {_tier(big.tier, per_node)}"
+        smallest = f", {_signed(small, side)} {_tier(small.tier, per_node)}" if small is not big else ""
+        # the smallest difference too, where the sentence stays short enough
+        text += smallest if words(text + smallest) <= MAX_WORDS - 1 else ""
+    others: dict[str, list] = {}
+    for r in rest:
+        lv = _level(r)
+        word = ("the other way" if _side(r) != side else _OTHER_WORDS[lv]) if lv in ("beats", "direction") \
+            else _OTHER_WORDS[lv]
+        others.setdefault(word, []).append(r.tier)
+    clauses = [f"{_tiers_phrase(tiers, per_node)}: {word}" for word, tiers in others.items()]
+    full = text + "".join(f"; {c}" for c in clauses) + "."
+    text = full if words(full) <= MAX_WORDS else text + "."
+    if words(text) > MAX_WORDS and where != "at every budget":  # the budgets listed: the largest says enough
+        return result_sentence(rows, level, side, short, per_node, panels, _every=True)
+    return text[0].upper() + text[1:]
+
+
+def _signed(r, side: int) -> str:
+    """The difference loser − winner with its interval, as the table prints it (signs turned where a is the winner)."""
+    from .findings_text import estimate_text
+    from .statistics import Paired
+
+    p = r.paired
+    if side > 0:
+        return estimate_text(p)
+    turned = Paired(p.b, p.a, p.budget, p.instances, p.b_wins, p.a_wins, -p.median, -p.high, -p.low, p.coverage)
+    return estimate_text(turned)
+
+
+def per_panel_sentence(rows: Sequence[Pooled], level: str, side: int, names: Mapping, per_node: bool) -> str | None:
+    """Where the result's panels can be tested one by one: in how many (panel, budget) cells it holds, the
+    exceptions named."""
+    cells = [c for r in rows for c in r.cells]
+    if level != "beats" or len({c.panel for c in cells}) < 2 or not any(_level(c) == "beats" for c in cells):
+        return None
+    holds = [c for c in cells if _level(c) == "beats" and _side(c) == side]
+    odd = [c for c in cells if c not in holds]
+    text = f"Panel by panel it holds in {len(holds)} of {len(cells)} (panel, budget) cases"
+    if not odd:
+        return f"Panel by panel it holds in every panel at every budget ({len(cells)} cases)."
+    if len(odd) <= 2:
+        where = join_words([f"{_tier(c.budget_tier(per_node), per_node)} on {names[c.panel]}" for c in odd])
+        return text + f", all but {where}."
+    return text + "."
+
+
+def also_sentence(rows_all: Sequence[Pooled], chosen: Sequence[Pooled], level: str, side: int,
+                  short: Mapping, per_node: bool = False) -> str | None:
+    """Other pairs against the same second design that go the same way at the same level, never the other way:
+    "W also beats X (at every budget) and Y (with any number of links), pooled"."""
+    c0 = chosen[0]
+    pairs: dict[tuple, list] = {}
+    for r in rows_all:
+        if r.b == c0.b and r.a != c0.a and r.group == c0.group:
+            pairs.setdefault(_pair_key(r), []).append(r)
+    same = []
+    for rs in pairs.values():
+        hits = [r for r in rs if _level(r) == level and _side(r) == side]
+        against = [r for r in rs if _level(r) in ("beats", "direction") and _side(r) != side]
+        if hits and not against:
+            where = "at every budget" if len(hits) == len(rs) > 1 else _tiers_phrase([r.tier for r in hits], per_node)
+            same.append(f"{short.get(rs[0].a, rs[0].a)} ({where})")
+    second = f"the {c0.b}" if c0.b == BOUND_LABEL else short.get(c0.b, c0.b)
+    pooled = ", pooled" if any(len(r.cells) > 1 for r in rows_all) else ""
+    for keep in (3, 2, 1):
+        names = same[:keep]
+        if not names:
+            return None
+        if side > 0:
+            verb = "beats" if level == "beats" else "costs less than"
+            text = f"{second[0].upper() + second[1:]} also {verb} {join_words(names)}{pooled}."
+        else:
+            plural = len(names) > 1
+            verb = ("beat" if plural else "beats") if level == "beats" else \
+                ("cost less than" if plural else "costs less than")
+            text = f"{join_words(names)} also {verb} {second}{pooled}."
+        if words(text) <= MAX_WORDS:
+            return text
+    return None
+
+
 # --------------------------------------------------------------------------- (d) difficulty
 
 
+def _one_system(rs: Records) -> bool:
+    """Whether a panel's instances are draws of one system (their specs differ in the seed at most)."""
+    return len({canonical_key({k: v for k, v in i.spec.items() if k not in _NOT_SYSTEM})
+                for i in rs.instances}) == 1
+
+
 def _nothing_costs(records: Records) -> dict[tuple, float]:
-    """Panel -> median cost of the autonomous loop (u = 0) over its instances."""
+    """Panel -> median cost of the autonomous loop (u = 0) over its instances, on panels that are one system each
+    (a median over two systems, ieee39 at two dampings, describes neither)."""
     out = {}
     for panel, rs in records.by_panel.items():
         costs = [r.cost for r in rs if r.method == _NOTHING and r.ok]
-        if costs:
+        if costs and _one_system(rs):
             out[panel] = float(np.median(costs))
     return out
 
 
-def difficulty_sentence(records, cells: Sequence[Comparison], names: Mapping) -> str | None:
+def _nothing_text(cost: float) -> str:
+    """"+4.7 % above LQR", "68 × LQR"."""
+    return _times(cost) if cost >= 10 else f"{_excess(cost)} above LQR"
+
+
+def difficulty_sentence(records, rows: Sequence[Pooled], short: Mapping, names: Mapping,
+                        per_node: bool = False) -> str | None:
     """Rule (d): where the result's panels differ in what doing nothing costs, that cost beside the gaps."""
     nothing = _nothing_costs(as_records(records))
-    panels = [c.panel for c in cells if c.panel in nothing and nothing[c.panel] > 1]
+    # One tier: any number of links where the result has it, else its largest.
+    tiers = [r.tier for r in rows]
+    tier = None if None in tiers else max(tiers)
+    (row,) = [r for r in rows if r.tier == tier]
+    cells = {c.panel: c for c in row.cells}
+    panels = [p for p in cells if p in nothing and nothing[p] > 1]
     by_family: dict = {}
-    for p in dict.fromkeys(panels):
+    for p in panels:
         by_family.setdefault(p[0], []).append(p)
     best = None
     for family_panels in by_family.values():
@@ -455,31 +495,16 @@ def difficulty_sentence(records, cells: Sequence[Comparison], names: Mapping) ->
     if best is None:
         return None
     easy, hard, _ = best
-    # One budget tier: any number of links where the result has it, else its largest.
-    tiers = {c.budget for c in cells}
-    tier = None if None in tiers else max(tiers)
-    gap = {c.panel: c.paired.median for c in cells if c.budget == tier}
-    if easy not in gap or hard not in gap:
-        return None
-    c0 = cells[0]
-    from .findings_text import number_text
-
-    short = short_names({c0.a, c0.b})
-    difference = f"{_subject(c0.a, short)} − {_subject(c0.b, short).removeprefix('the ')}"
-
-    def share(p) -> str:
-        """The gap as a share of what u = 0 costs over LQR, where that is a yardstick (under 10 × LQR)."""
-        share_ = 100 * abs(gap[p]) / (nothing[p] - 1)
-        text = f"{share_:.0f}" if share_ >= 10 else f"{share_:.2g}"
-        return f" ({text} % of u = 0's excess)" if nothing[p] < 10 else ""
-
-    bounded = (", which bounds every gap between designs that beat doing nothing there"
-               if nothing[easy] - 1 < 0.1 else "")
-    return (f"How hard the problem is changes across these panels: doing nothing (u = 0) costs "
-            f"{_excess(nothing[easy])} over LQR on {names[easy]} but {_excess(nothing[hard])} on {names[hard]}"
-            f"{bounded}; on those two panels {difference} is {number_text(gap[easy])}{share(easy)} and "
-            f"{number_text(gap[hard])}{share(hard)} {'with any number of links' if tier is None else f'within {tier:g} links'}"
-            ", median paired differences.")
+    c0 = row.cells[0]
+    difference = f"{short.get(c0.a, c0.a)} − {short.get(c0.b, c0.b)}"
+    bounded = " (a ceiling on every gap there)" if nothing[easy] - 1 < 0.1 else ""
+    for extra in (bounded, ""):
+        text = (f"Doing nothing (u = 0) costs {_nothing_text(nothing[easy])} on {names[easy]}{extra} but "
+                f"{_nothing_text(nothing[hard])} on {names[hard]}, while {difference} is {_median_text(cells[easy])} "
+                f"and {_median_text(cells[hard])} there {_tier(tier, per_node)}.")
+        if words(text) <= MAX_WORDS:
+            return text
+    return None
 
 
 # --------------------------------------------------------------------------- the answer
@@ -487,7 +512,7 @@ def difficulty_sentence(records, cells: Sequence[Comparison], names: Mapping) ->
 
 def answer_lines(records, comparisons: Sequence[Comparison], *, meta=None, members=None) -> list[str]:
     """The report's answer: at most :data:`MAX_SENTENCES` sentences by the rules of this module, one per line,
-    then an empty line; nothing where no rule applies.
+    then an empty line, then the ladder's table where a spec asks for one; nothing where no rule applies.
 
     Parameters
     ----------
@@ -496,35 +521,34 @@ def answer_lines(records, comparisons: Sequence[Comparison], *, meta=None, membe
     comparisons : sequence of Comparison
         :func:`compare.report.findings.select_comparisons` of the records.
     meta, members : optional
-        The store's metadata and the experiments' members: rule (b) needs them to find
-        the experiments that ask for Table 1.
+        The store's metadata and the experiments' members: rules (0) and (b) need them to find
+        the experiments that ask for a ladder or for Table 1.
     """
-    from .findings_text import panel_names
+    from .findings_text import comparison_short_names, panel_names
 
     records = as_records(records)
     all_panels = sorted(records.by_panel, key=_panel_order)
     report_names = panel_names(all_panels) if all_panels else {}
     cell_names = panel_names(list(dict.fromkeys(c.panel for c in comparisons))) if comparisons else {}
-    order = {}
-    for c in comparisons:
-        order.setdefault((c.group, c.a, c.b), len(order))
     flagged: set = set()
     ladder, ladder_details = ladder_lines(records, meta, members)
     parts = decomposition_sentences(records)
     sentences = ladder + parts + failure_sentences(records, report_names, flagged)
     reproduction = reproduction_sentences(records, meta, members)
     sentences += reproduction
-    result = pooled_sentence(comparisons, order, flagged) if comparisons and not parts else None
-    if result is None and not reproduction and not ladder and not parts and comparisons:
-        result = claim_sentence(comparisons, order, cell_names)
-    if result is not None:
-        text, cells = result
-        sentences.append(text)
-        context = difficulty_sentence(records, cells, cell_names)
-        if context:
-            sentences.append(context)
+    if comparisons and not (ladder or parts or reproduction) and len(sentences) < MAX_SENTENCES:
+        rows = [r for r in pooled_rows(comparisons)  # a pair rule (a) names as failing on a panel is stated there
+                if not any((c.panel, x) in flagged for c in r.cells for x in (c.a, c.b))]
+        short = comparison_short_names(comparisons)
+        per_node = budgets_per_node(comparisons)
+        chosen = _result(rows, flagged, short)
+        if chosen is not None:
+            mine, level, side = chosen
+            sentences.append(result_sentence(mine, level, side, short, per_node, len(cell_names)))
+            sentences += [s for s in (per_panel_sentence(mine, level, side, cell_names, per_node)
+                                      or also_sentence(rows, mine, level, side, short, per_node),
+                                      difficulty_sentence(records, mine, short, cell_names, per_node)) if s]
     sentences = sentences[:MAX_SENTENCES]
-    if ladder_details:  # the ladder's verdict, its list, then the other sentences
-        return sentences[:len(ladder)] + ["", *ladder_details, ""] + sentences[len(ladder):] + (
-            [""] if sentences[len(ladder):] else [])
+    if ladder_details:  # the ladder's verdict, the other sentences, then its table
+        return sentences + [""] + ladder_details + [""]
     return sentences + [""] if sentences else []

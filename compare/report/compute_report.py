@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..run.records import Records, as_records
+from .figures import MIN_POINTS
 
 __all__ = ["ComputeCell", "compute_cells", "growth_exponent", "growth_sentences", "plot_compute", "compute_markdown",
            "compute_section", "instances_per_size", "MIN_SIZES", "FEW_RUNS", "NOT_MEASURED"]
@@ -296,7 +297,7 @@ def _draw_series(ax, xs, ys, counts, style, rank: int, label: str, *, annotate: 
                 markersize=size, markerfacecolor="white", markeredgecolor=style.colour, zorder=2.5 + rank)
         for x, y, k in few if annotate else ():
             ax.annotate(f"{k} run{'s' if k != 1 else ''}", (x, y), xytext=(6, -3),
-                        textcoords="offset points", fontsize=6, color=style.colour)
+                        textcoords="offset points", fontsize=MIN_POINTS, color=style.colour)
     return line
 
 
@@ -359,8 +360,9 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
     own_figure = axes is None
     if own_figure:
         # Two by two, the legend in the fourth place: in one row of three the page's 800 px
-        # shrank the legend's text to about 5 px.
-        fig, grid = plt.subplots(2, 2, figsize=(11, 9.6), constrained_layout=True)
+        # shrank the legend's text to about 5 px. At most MAX_WIDTH wide, so that 8-point type
+        # (and the 10^k ticks' exponents) stays 9 px tall on that page.
+        fig, grid = plt.subplots(2, 2, figsize=(8.6, 8.4), constrained_layout=True)
         grid[1, 1].axis("off")
         axes = (grid[0, 0], grid[0, 1], grid[1, 0])
     else:
@@ -384,7 +386,7 @@ def plot_compute(cells, *, axes=None, styles: dict | None = None, instances: dic
     if own_figure:  # one legend for all panels, in the fourth place, so that no entry covers a line
         _legend_in_place(fig, grid[1, 1], handles, texts)
     else:
-        axes[0].legend(handles, texts, ncol=columns, fontsize=6)
+        axes[0].legend(handles, texts, ncol=columns, fontsize=MIN_POINTS)
     return fig, axes
 
 
@@ -416,6 +418,8 @@ def _label_compute_axes(axes, sizes: list, empty: list) -> None:
     for ax in axes:
         ax.set_xscale("log")
         ax.set_yscale("log")
+        # 11 points: the exponents of 10^k are drawn at 70 % of it, 7.7 points, 9 px on an 800 px page
+        ax.tick_params(axis="both", labelsize=11)
         ax.set_xticks(sizes)
         ax.set_xticklabels([str(n) for n in sizes])
         ax.minorticks_off()
@@ -436,8 +440,9 @@ def _label_compute_axes(axes, sizes: list, empty: list) -> None:
         ax.yaxis.set_major_locator(NullLocator())
 
 
-def _legend_in_place(fig, place, handles, texts, *, largest: float = 11.0, smallest: float = 4.0) -> None:
-    """A figure legend centred in the empty axes ``place``, in one column or two, at the largest type that fits.
+def _legend_in_place(fig, place, handles, texts, *, largest: float = 11.0, smallest: float = 8.0) -> None:
+    """A figure legend centred in the empty axes ``place``, in one column or two, at the largest type that fits;
+    below the panels at ``smallest`` type where even that does not fit (the figure grows to take it).
 
     A legend's extent grows in proportion to its type size, so one layout at ``largest``
     gives the size at which each column count fits; more methods get smaller type,
@@ -455,8 +460,14 @@ def _legend_in_place(fig, place, handles, texts, *, largest: float = 11.0, small
         legend.remove()
         if best is None or size > best[1] + 1e-9:
             best = (ncol, size)
-    fig.legend(handles, texts, loc="center", bbox_to_anchor=anchor, ncol=best[0], fontsize=max(smallest, best[1]),
-               frameon=False)
+    if best[1] < smallest:
+        # Too many methods for the fourth place at legible type: below the panels, the figure taller by its height.
+        legend = fig.legend(handles, texts, loc="outside lower center", ncol=2, fontsize=smallest, frameon=False)
+        fig.draw_without_rendering()
+        width, height = fig.get_size_inches()
+        fig.set_size_inches(width, height + legend.get_window_extent().height / fig.dpi)
+        return
+    fig.legend(handles, texts, loc="center", bbox_to_anchor=anchor, ncol=best[0], fontsize=best[1], frameon=False)
 
 
 def _fmt_mb(value: float) -> str:

@@ -22,13 +22,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .figures import (OFF_SCALE, boundary_handles, draw_boundary, draw_front_line, shared_y, excess, excess_axis,
-                      finish_legend, legend_handles, links_axis, method_gid, panel_figure, panel_heading, y_limits)
+from .figures import (COST_PAD, OFF_SCALE, TICK_POINTS, TITLE_POINTS, boundary_handles, cost_range,
+                      draw_boundary, draw_front_line, excess, excess_axis, finish_legend, legend_handles, links_axis,
+                      mark_above, method_gid, panel_figure, panel_heading, panel_order, per_node_axis, shared_y)
 from ..run.records import as_records
 from .statistics import best_within, front_quantiles
 from .styles import Style
 
-__all__ = ["Point", "aggregate", "pareto_front", "plot_cost_vs_links", "quartiles", "REACH_SHARE", "axis_costs"]
+__all__ = ["Point", "aggregate", "pareto_front", "plot_cost_vs_links", "quartiles", "REACH_SHARE", "axis_costs",
+           "settings_drawn"]
 
 #: A summary point is drawn only where at least this share of its instances reach it.
 REACH_SHARE = 0.5
@@ -125,6 +127,14 @@ def axis_costs(points: list[Point], fronts) -> list[float]:
     return [c for c in costs if c <= OFF_SCALE]
 
 
+def settings_drawn(points: list[Point]) -> str:
+    """How many of the settings with a usable design have a marker ("55 of 319 settings"): the others lie below
+    their method's front (the medians table lists every setting)."""
+    usable = [p for p in points if p.ok]
+    drawn = sum(p.reached for p in usable)
+    return f"all {drawn} settings" if drawn == len(usable) else f"{drawn} of {len(usable)} settings"
+
+
 def pareto_front(points: list[Point]) -> list[Point]:
     """The reached points no other reached point beats on both links (``x``) and median cost."""
     ok = sorted((p for p in points if p.reached and np.isfinite(p.cost[1])), key=lambda p: (p.x, p.cost[1]))
@@ -136,13 +146,16 @@ def pareto_front(points: list[Point]) -> list[Point]:
     return front
 
 
-def _dodge(series_by_label: dict) -> dict:
+def _dodge(series_by_label: dict, y_points=None) -> dict:
     """Label -> horizontal offset in points for single-setting methods that share an x position.
 
     Autonomous and decentralized both sit at 0 links: without an offset one hides the
     other. The offsets are symmetric about the true link count, and a method alone at its
     count is never moved (LQR once stood 6 points left of its 380 links, which on a log
-    axis read as about 230, left of the QI boundary).
+    axis read as about 230, left of the QI boundary). With ``y_points`` (cost -> its height
+    in points on the axis) only markers that would touch are moved: LQR on the bottom edge
+    stays at its link count below the SLS designs that share it. :func:`_inside` then keeps
+    a group within its axes.
     """
     at = defaultdict(list)
     for label, series in series_by_label.items():
@@ -150,21 +163,63 @@ def _dodge(series_by_label: dict) -> dict:
             at[round(series[0][0], 6)].append(label)
     offsets = {}
     for group in at.values():
-        if len(group) > 1:
-            for i, label in enumerate(sorted(group)):
-                offsets[label] = 7.0 * (i - (len(group) - 1) / 2)
+        for cluster in _touching(group, series_by_label, y_points):
+            if len(cluster) > 1:
+                for i, label in enumerate(sorted(cluster)):
+                    offsets[label] = _DODGE * (i - (len(cluster) - 1) / 2)
     return offsets
 
 
-def _mark_off_scale(ax, marks, top: float) -> int:
-    """A triangle on the top edge and the median cost below it for each (x, cost, colour) above the axis.
+def _touching(labels: list, series_by_label: dict, y_points) -> list[list]:
+    """``labels`` (single settings at one link count) in clusters of markers less than a marker apart in height."""
+    if y_points is None:
+        return [labels]
+    ordered = sorted(labels, key=lambda lb: y_points(series_by_label[lb][0][1]))
+    clusters: list[list] = []
+    for label in ordered:
+        y = y_points(series_by_label[label][0][1])
+        if clusters and y - y_points(series_by_label[clusters[-1][-1]][0][1]) < _DODGE:
+            clusters[-1].append(label)
+        else:
+            clusters.append([label])
+    return clusters
 
-    Labels closer than about 30 points to the previous one in a row go one row lower; a
-    label at either edge of the axes extends inwards. Returns the number of label rows.
+
+#: Points between the markers of single-setting methods at one link count, and the room a marker needs from
+#: an edge of its axes (its radius and its edge line).
+_DODGE, _MARKER_ROOM = 7.0, 5.0
+
+
+def _inside(ax, offsets: dict, series_by_label: dict) -> dict:
+    """``offsets`` with each group of dodged markers moved inwards where its outer markers would leave the axes.
+
+    SLS on the plant, plant² and plant³ graphs and on the complete graph all sit at the last link count, where
+    symmetric offsets put the hexagons outside the frame on every tradeoff panel.
+    """
+    groups = defaultdict(list)
+    for label, offset in offsets.items():
+        groups[round(series_by_label[label][0][0], 6)].append(label)
+    width = ax.get_window_extent().width * 72.0 / ax.figure.dpi  # the axes' width in points, as laid out now
+    out = dict(offsets)
+    for x, labels in groups.items():
+        at = (ax.transLimits.transform(ax.transScale.transform((x, 1.0)))[0]) * width  # points from the left edge
+        low, high = min(out[lb] for lb in labels), max(out[lb] for lb in labels)
+        shift = min(0.0, width - _MARKER_ROOM - (at + high)) + max(0.0, _MARKER_ROOM - (at + low))
+        for lb in labels:
+            out[lb] += shift
+    return out
+
+
+def _mark_off_scale(ax, marks, top: float) -> int:
+    """A triangle on the top edge and the median cost above it for each (x, cost, colour) above the axis.
+
+    The values are written above the axes' frame, under the title, where no line is drawn (inside the axes,
+    fronts struck "J = 5.18" through). Labels closer than about 30 points to the previous one in a row go
+    one row higher; a label at either edge of the axes extends inwards. Returns the number of label rows.
     """
     labels: dict[tuple, list[str]] = {}  # (x, text) -> colours: methods sharing a value get one label
     for x, cost, colour in sorted(marks):
-        ax.plot(x, top, marker="^", color=colour, markersize=8, clip_on=False, linestyle="none", zorder=5)
+        mark_above(ax, x, colour)
         labels.setdefault((x, f"{cost:.3g}"), []).append(colour)
     rows: list[float] = []
     left, right = (v * 72.0 / ax.figure.dpi for v in ax.transAxes.transform([(0, 0), (1, 0)])[:, 0])
@@ -173,11 +228,17 @@ def _mark_off_scale(ax, marks, top: float) -> int:
         row = next((i for i, last in enumerate(rows) if px - last >= 30.0), len(rows))
         rows[row:row + 1] = [px]
         ha, dx = ("right", 5) if right - px < 20 else ("left", -5) if px - left < 20 else ("center", 0)
-        ax.annotate(f"J = {text}" if row == 0 and len(labels) == 1 else text, (x, top), xytext=(dx, -4 - 9 * row),
-                    textcoords="offset points", ha=ha, va="top", fontsize=7,
-                    color=colours[0] if len(set(colours)) == 1 else "0.25", zorder=6,
-                    bbox={"boxstyle": "square,pad=0.1", "facecolor": "white", "edgecolor": "none", "alpha": 0.85})
+        ax.annotate(f"J = {text}" if row == 0 and len(labels) == 1 else text, (x, 1.0),
+                    xycoords=ax.get_xaxis_transform(), xytext=(dx, _ABOVE + _ROW * row), textcoords="offset points",
+                    ha=ha, va="bottom", fontsize=MIN_TEXT, color=colours[0] if len(set(colours)) == 1 else "0.25",
+                    zorder=6, annotation_clip=False)
     return len(rows)
+
+
+#: Points from the top edge to the first row of off-scale values (above the triangle), and between rows.
+_ABOVE, _ROW = 6.0, 10.0
+#: The smallest type of this figure (the off-scale values), in points.
+MIN_TEXT = 8.0
 
 
 def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: dict | None = None,
@@ -217,16 +278,16 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
     """
     from .statistics import budget_fronts
 
-    panels = sorted({p.panel for p in points})
+    panels = panel_order({p.panel for p in points})
     labels = sorted({p.label for p in points})
     styles = styles or {p.label: Style("#333333", "o", p.info_model) for p in points}
     fig, axes, own = panel_figure(panels, axes)
-    per_node = len({p[1] for p in panels}) > 1
+    per_node = per_node_axis(panels)
     designs = as_records(records).by_panel if records is not None else {}
     if fronts is None:
         fronts = budget_fronts(records) if records is not None else []
 
-    limits = y_limits(axis_costs(points, fronts)) if shared_y(panels) else None
+    limits = cost_range(axis_costs(points, fronts), COST_PAD) if shared_y(panels) else None
     for panel in panels:
         ax = axes[panel]
         usable = [p for p in points if p.panel == panel and p.ok > 0]
@@ -236,8 +297,8 @@ def plot_cost_vs_links(points: list[Point], *, records=None, axes=None, styles: 
     if own:
         finish_legend(fig, legend_handles(styles, labels) + boundary_handles(axes.values()),
                       title="line: median over instances of the best\ncost within L links (budget front)\n"
-                            "marker: one setting's medians, where on\nor above its method's front\n"
-                            "faint: every instance's design")
+                            "marker: one setting's medians, where on\nor above its method's front "
+                            f"({settings_drawn(points)})\nfaint: every instance's design")
     return fig, axes
 
 
@@ -250,15 +311,18 @@ def _draw_panel(fig, ax, panel: tuple, usable: list[Point], fronts, designs, *, 
     """
     mine = {f.label: f for f in fronts if f.panel == panel}
     scale = panel[1] if per_node and panel[1] else 1.0  # links per node; 0: a family without n
-    bottom, top = limits or y_limits(axis_costs(usable, mine.values()))
+    bottom, top = limits or cost_range(axis_costs(usable, mine.values()), COST_PAD)
     right = max(p.links[2] for p in usable) / scale
+    _finish_axes(ax, bottom, top, right, per_node)  # first: the markers are kept inside the axes as laid out
     if designs is not None:
         _draw_designs(ax, designs, styles, scale, bottom)
     for label, f in sorted(mine.items()):
         draw_front_line(ax, f, styles[label], bottom, right * scale, scale)
     off_scale = _draw_settings(fig, ax, usable, labels, styles, scale, bottom)
-    _finish_axes(ax, bottom, top, right, per_node, off_scale)
-    ax.set_title(panel_heading(panel, (instances or {}).get(panel)), fontsize=10)
+    rows = _mark_off_scale(ax, off_scale, ax.get_ylim()[1]) if off_scale else 0
+    # The title clears the off-scale values written above the frame.
+    ax.set_title(panel_heading(panel, (instances or {}).get(panel)), fontsize=TITLE_POINTS,
+                 pad=6 + (_ABOVE + _ROW * rows if rows else 0))
     if boundaries and panel in boundaries and any(p.info_model == "delayed" for p in usable):
         draw_boundary(ax, boundaries[panel] / scale)
     ax.grid(True, which="major", alpha=0.3)
@@ -284,7 +348,14 @@ def _draw_settings(fig, ax, usable: list[Point], labels: list[str], styles: dict
 
     series = {label: sorted((p.x / scale, p.cost[1]) for p in usable if p.label == label and p.reached)
               for label in labels}
-    offsets = _dodge({k: v for k, v in series.items() if v})
+    drawn = {k: v for k, v in series.items() if v}
+    dpi = ax.figure.dpi
+
+    def y_points(cost):  # a cost's height on the axis in points, as drawn (above the axis: on its top edge)
+        value = min(excess(min(cost, OFF_SCALE), bottom), ax.get_ylim()[1])
+        return ax.transData.transform((1.0, value))[1] * 72.0 / dpi
+
+    offsets = _inside(ax, _dodge(drawn, y_points), drawn)
     off_scale = []
     for label in labels:
         if not series[label]:
@@ -314,13 +385,16 @@ def _draw_setting_markers(ax, label: str, series: list[tuple], s: Style, bottom:
     return off_scale
 
 
-def _finish_axes(ax, bottom: float, top: float, right: float, per_node: bool, off_scale: list[tuple]) -> None:
-    """A panel's cost and links axes and their labels, what lies above the cost axis marked on its top edge."""
-    excess_axis(ax, bottom, top * 1.3)
+def _finish_axes(ax, bottom: float, top: float, right: float, per_node: bool) -> None:
+    """A panel's cost and links axes and their labels.
+
+    What lies above the cost axis is marked on its own top edge afterwards (:func:`_mark_off_scale`, at
+    ``ax.get_ylim()[1]``): where every shown cost is within 0.8 % of LQR's, the top lies below
+    ``top`` (or at or below 0, far off a log axis, which blew a figure up to 390,000 px).
+    """
+    excess_axis(ax, bottom, top)
     links_axis(ax, right, per_node=per_node)
-    # On the axis's own top edge: where every shown cost is within 0.8 % of LQR's, top * 1.3 lies
-    # below it (or at or below 0, far off a log axis, which blew a figure up to 390,000 px).
-    if off_scale:
-        _mark_off_scale(ax, off_scale, ax.get_ylim()[1])
-    ax.set_xlabel("directed off-diagonal links per node" if per_node else "directed off-diagonal links")
-    ax.set_ylabel("excess cost over LQR")
+    ax.set_xlabel("directed off-diagonal links per node" if per_node else "directed off-diagonal links",
+                  fontsize=TICK_POINTS)
+    ax.set_ylabel("excess cost over LQR", fontsize=TICK_POINTS)
+    ax.tick_params(axis="both", labelsize=TICK_POINTS)

@@ -212,8 +212,9 @@ def divergence(records) -> list[Divergence]:
     """Divergence of every arm on every system (all designs, usable or not)."""
     out = []
     for system, rs in sorted(as_records(records).group(_system).items(), key=lambda kv: tuple(map(str, kv[0]))):
-        radii = [i.radius for i in rs.instances if i.radius is not None]
-        radius = float(np.median(radii)) if radii else None
+        radii = sorted(i.radius for i in rs.instances if i.radius is not None)
+        # The upper median, a radius some instance has: what the systems table gives.
+        radius = float(radii[len(radii) // 2]) if radii else None
         for (arm, activation), arm_rs in sorted(rs.group(lambda r: (_arm(r), _activation(r))).items(),
                                                 key=lambda kv: (str(kv[0][0]), kv[0][1])):
             if arm is None:
@@ -232,12 +233,22 @@ def _budget(b) -> str:
     return "any number of links" if b is None else f"≤ {b:g} links"
 
 
+def _within(b) -> str:
+    return "with any number of links" if b is None else f"within {b:g} links"
+
+
 def _signed(p: Paired) -> str:
-    return f"{p.median:+.4f} {p.interval_text}"
+    """A paired median with its 95 % interval, at the precision the interval supports (as the tables print it)."""
+    from .findings_text import estimate_text
+
+    return estimate_text(p, coverage=True)
 
 
 def _pct(x: float) -> str:
-    return "—" if not np.isfinite(x) else f"{100 * x:+.1f} %"
+    if not np.isfinite(x):
+        return "—"
+    text = f"{100 * x:+.1f}"
+    return "0 %" if float(text) == 0 else text.replace("-", "−") + " %"
 
 
 _STARTS = {"delayed": "the delayed ℓ1 path's design", "diagonal": "the diagonal gain",
@@ -250,34 +261,51 @@ def _starts(records: Records, system: tuple) -> str:
     return " or ".join(_STARTS.get(i, i) for i in inits) or "a static design"
 
 
-def _count_phrase(d: Decomposition) -> str:
-    used = d.parts["total"].instances
-    pooled = f", {d.panels} panels pooled" if d.panels > 1 else ""
-    if used == d.instances:
-        return f"{d.instances} instances{pooled}"
-    return f"{used} of its {d.instances} instances, those where every arm has a design within the budget{pooled}"
-
-
-def _parts_sentence(records: Records, rows: Sequence[Decomposition]) -> str:
-    """The headline decomposition: with any number of links, and the tightest budget the warm start leaves open."""
-    d = next((r for r in rows if r.budget is None), rows[-1])
+def _largest_sentence(rows: Sequence[Decomposition]) -> str:
+    """Where the paper design's excess over the best delayed static design is largest, and what a warm start
+    leaves of it there."""
+    d = max((r for r in rows if r.parts["total"].instances), key=lambda r: r.parts["total"].median)
     p = d.parts
     name = "linear GRNN-Sparse" if d.activation == "linear" else "GRNN-Sparse"
-    text = (f"On {system_title(d.system)} ({_count_phrase(d)}), with {_budget(d.budget)} the paper's {name} costs "
-            f"{_signed(p['total'])} × LQR more than the best delayed static design (paired medians with 95 % "
-            f"intervals): its shared readout accounts for {_signed(p['model class'])} (against a per-node readout, "
-            f"both from random weights) and its random start for {_signed(p['training'])} (against the per-node one "
-            f"started from {_starts(records, d.system)}), which ends {_signed(p['remains'])} from the static design")
-    open_gap = [r for r in rows if r.budget is not None and r.parts["remains"].instances and r.parts["remains"].low > 0]
-    if open_gap:
-        g = open_gap[0]
-        text += (f"; within {g.budget:g} links the warm-started one still costs {_signed(g.parts['remains'])} more "
-                 f"({g.parts['remains'].instances} instances)")
+    text = (f"On {system_title(d.system)}, the paper's {name} costs most above the best delayed static design "
+            f"{_within(d.budget)}: {_signed(p['total'])} × LQR on {p['total'].instances} instances")
+    remains = p["remains"]
+    if remains.instances and remains.low > 0:
+        text += f"; warm-started from a static design, a per-node one still costs {_signed(remains)} more"
+    elif remains.instances and remains.high < 0:
+        text += f"; warm-started from a static design, a per-node one costs {_signed(remains)} less than it"
     return text + "."
 
 
+def _parts_sentence(rows: Sequence[Decomposition]) -> str:
+    """With any number of links (or the largest budget): the excess, and what the shared output layer and the
+    random start each account for."""
+    d = next((r for r in rows if r.budget is None), rows[-1])
+    p = d.parts
+    largest = max((r for r in rows if r.parts["total"].instances), key=lambda r: r.parts["total"].median)
+    lead = (f"{_within(d.budget)[0].upper()}{_within(d.budget)[1:]} the excess falls to {_signed(p['total'])}"
+            if largest is not d else f"{_within(d.budget)[0].upper()}{_within(d.budget)[1:]}")
+    return (f"{lead}: {_signed(p['model class'])} from sharing one output layer among the nodes and "
+            f"{_signed(p['training'])} from the random start (against a warm start).")
+
+
+def _arm_names(arms: list) -> str:
+    """"the tanh paper arm", "both per-node arms and the tanh paper arm": (activation, arm) as the divergence
+    table names them, an arm whose two activations go together named once."""
+    by_arm: dict[str, list] = {}
+    for activation, arm in arms:
+        by_arm.setdefault(arm, []).append(activation)
+    both = [arm for arm, acts in by_arm.items() if len(acts) == 2]
+    single = [f"{acts[0]} {arm}" for arm, acts in by_arm.items() if len(acts) == 1]
+    parts = [f"both {arm} arms" for arm in both]
+    if single:
+        parts.append(f"the {join_words(single)} arm{'s' if len(single) > 1 else ''}")
+    return join_words(parts)
+
+
 def _divergence_sentence(records: Records) -> str | None:
-    """Divergence from random weights against a warm start, on the system with the largest open-loop radius."""
+    """Divergence from random weights against a warm start, on the system with the largest open-loop radius: the
+    designs that diverged, arm by arm (counts as the divergence table gives them)."""
     div = [v for v in divergence(records) if v.radius is not None]
     if not div:
         return None
@@ -285,43 +313,51 @@ def _divergence_sentence(records: Records) -> str | None:
     here = [v for v in div if v.system == worst]
     cold = [v for v in here if v.arm != "warm"]
     warm = [v for v in here if v.arm == "warm"]
-    if not any(v.diverged_instances for v in cold):
+    if not any(v.diverged_designs for v in cold):
         return None
-    n = max(v.instances for v in here)
-    counts = ", ".join(f"{v.arm} {v.activation} {v.diverged_instances}" for v in cold)
-    text = (f"On {system_title(worst)} (open-loop spectral radius {here[0].radius:.2f}), GRNN-Sparse from random "
-            f"weights diverges at some β on up to {max(v.diverged_instances for v in cold)} of {n} instances "
-            f"({counts})")
+    groups: dict[tuple, list] = {}
+    for v in cold:
+        groups.setdefault((v.diverged_designs, v.designs), []).append((v.activation, v.arm))
+    ranked = sorted(groups.items(), key=lambda kv: (-kv[0][0], kv[0][1]))
+    counts = [f"{k} of {n} designs of {_arm_names(arms)}" if i == 0 else f"{k} of {n} of {_arm_names(arms)}"
+              for i, ((k, n), arms) in enumerate(ranked)]
+    text = (f"On {system_title(worst)} (open-loop spectral radius {here[0].radius:.4g}), random weights diverged in "
+            f"{join_words(counts)}")
     if warm:
-        diverged = sum(v.diverged_instances for v in warm)
-        kept = sum(v.kept_starts for v in warm)
-        runs = sum(v.designs for v in warm)
-        text += (f"; started from {_starts(records, worst)} it diverges on "
-                 f"{'none' if not diverged else f'{diverged} instance-arms'}, keeping its start in {kept} of {runs} runs")
+        diverged = sum(v.diverged_designs for v in warm)
+        designs = sum(v.designs for v in warm)
+        text += f"; from {_starts(records, worst)}, {'none' if not diverged else f'{diverged} of {designs}'} did"
     return text + "."
 
 
-
 def _nonlinearity_sentence(records: Records, system: tuple) -> str | None:
+    """tanh against linear at equal information and links: only the budgets whose interval excludes 0 are claimed."""
     nl = [x for x in nonlinearity(records) if x.system == system and x.arm == "paper" and x.paired.instances]
     if not nl:
         return None
-    helps = [x for x in nl if x.paired.high < 0]
-    hurts = [x for x in nl if x.paired.low > 0]
-    span = f"{min(x.paired.median for x in nl):+.4f} to {max(x.paired.median for x in nl):+.4f}"
+    helps = [x for x in nl if x.paired.high < 0 and not x.paired.too_few]
+    hurts = [x for x in nl if x.paired.low > 0 and not x.paired.too_few]
+
+    def span(xs) -> str:
+        values = sorted(xs, key=lambda x: x.paired.median)
+        if len(values) == 1:
+            return _signed(values[0].paired)
+        return f"{_signed(values[0].paired)} to {_signed(values[-1].paired)}"
+
     if helps:
-        verdict = (f"the tanh nonlinearity lowers the cost at {join_words(_budget(x.budget) for x in helps)} "
-                   f"(tanh − linear medians {span} across budgets)")
+        verdict = (f"the tanh nonlinearity lowers the cost {join_words(_within(x.budget) for x in helps)} "
+                   f"(tanh − linear {span(helps)})")
     elif hurts:
-        verdict = (f"the tanh nonlinearity adds nothing: at {join_words(_budget(x.budget) for x in hurts)} the "
-                   f"linear GRNN-Sparse costs less (tanh − linear medians {span} across budgets)")
+        verdict = (f"the tanh nonlinearity adds nothing: {join_words(_within(x.budget) for x in hurts)} the linear "
+                   f"GRNN-Sparse costs less (tanh − linear {span(hurts)})")
     else:
-        verdict = f"tanh and linear GRNN-Sparse cannot be told apart (tanh − linear medians {span}, every interval holding 0)"
-    return f"At equal information and equal links on {system_title(system)}, {verdict}."
+        verdict = "tanh and linear GRNN-Sparse cannot be told apart (every interval of tanh − linear holds 0)"
+    return f"At equal information and links on {system_title(system)}, {verdict}."
 
 
 def decomposition_sentences(records) -> list[str]:
-    """At most three sentences: the decomposition, divergence with and without a warm start, the nonlinearity."""
+    """The answer's sentences: where the excess is largest, its parts with any number of links, divergence with and
+    without a stable start (and the nonlinearity, which the answer's three sentences leave out)."""
     records = as_records(records)
     rows = decompose(records)
     if not rows:
@@ -331,13 +367,13 @@ def decomposition_sentences(records) -> list[str]:
         by_system.setdefault(d.system, []).append(d)
     system = max(by_system, key=lambda s: (by_system[s][0].instances, str(s)))
     tanh = [d for d in by_system[system] if d.activation == "tanh"] or by_system[system]
-    sentences = [_parts_sentence(records, tanh), _divergence_sentence(records),
+    sentences = [_largest_sentence(tanh), _parts_sentence(tanh), _divergence_sentence(records),
                  _nonlinearity_sentence(records, system)]
     return [x for x in sentences if x]
 
 
 def _interval_cell(p: Paired) -> str:
-    return "—" if not p.instances else f"{p.median:+.4f} {p.interval_text}"
+    return "—" if not p.instances else _signed(p)
 
 
 def decomposition_section(records, save=None) -> list[str]:
@@ -352,17 +388,19 @@ def decomposition_section(records, save=None) -> list[str]:
         save(fig, "decomposition")
         lines += ["![decomposition](decomposition.png)", ""]
     lines += [
-        "Per instance and link budget, the paper's GRNN-Sparse (shared readout, random start) against the best "
-        "delayed static design (the same information: own state now, neighbours' one step late) splits as "
-        "*total* = *model class* (paper − per-node readout, both from random weights) + *training* (per-node from "
-        "random − per-node warm-started from a static design on its instance: the delayed ℓ1 path's design at "
-        "γ = β / trace(P), or the diagonal gain) + *what remains* (warm − static). Each entry is a paired difference "
-        "of LQR-normalized best costs within the budget: its median over the instances where every arm has a design "
-        "within the budget (the column *instances*), with a distribution-free 95 % interval (positive: the first costs "
-        "more; a percentage after it is the interval's coverage where too few instances allow 95 %). Medians do not "
-        "add, so the parts need not sum to the total. A per-node readout holds every delayed static gain exactly "
-        "(docs/methods.md), so a positive *remains* is what training from the static design's own closed loop could "
-        "not recover at that budget, and a negative one what the dynamic controller adds.", ""]
+        "Per instance and link budget, the excess of the paper's GRNN-Sparse over the best delayed static design "
+        "(the same information: own state now, neighbours' one step late) splits into three parts. The GRNN's "
+        "*readout* is its output layer, which turns a node's hidden state into its input; the paper shares one "
+        "among all nodes. *Model class*: the paper's design against the same with one readout per node, both "
+        "trained from random weights. *Training*: that per-node design against the same with a warm start, "
+        "trained from a static design on its instance (the delayed ℓ1 path's design at γ = β / trace(P), "
+        "or the diagonal gain). *Remains*: the warm-started design against the static one; a per-node readout "
+        "holds every delayed static gain exactly (docs/methods.md), so a positive value is what training could "
+        "not recover, a negative one what the dynamic controller adds. Each entry is the median of the paired "
+        "difference (LQR-normalized best costs within the budget; positive: the first costs more) over the "
+        "instances where every arm has a design within the budget (column *instances*), with a distribution-free "
+        "95 % interval (a percentage after it: its coverage, where too few instances allow 95 %). Medians do not "
+        "add, so the parts need not sum to the total.", ""]
     for system in dict.fromkeys(d.system for d in rows):
         here = [d for d in rows if d.system == system]
         pooled = f", {here[0].panels} panels pooled" if here[0].panels > 1 else ""
@@ -398,7 +436,7 @@ def decomposition_section(records, save=None) -> list[str]:
                   "that did, and for warm starts the runs that kept their start (training diverged or ended above it).", "",
                   "| system | open-loop radius | arm | activation | instances diverged | designs diverged | starts kept |",
                   "|---|---:|---|---|---:|---:|---:|"]
-        lines += [f"| {system_title(v.system)} | {'—' if v.radius is None else f'{v.radius:.2f}'} | {v.arm} | {v.activation} | "
+        lines += [f"| {system_title(v.system)} | {'—' if v.radius is None else f'{v.radius:.4g}'} | {v.arm} | {v.activation} | "
                   f"{v.diverged_instances} of {v.instances} | {v.diverged_designs} of {v.designs} | "
                   f"{v.kept_starts if v.arm == 'warm' else '—'} |" for v in div]
         lines.append("")

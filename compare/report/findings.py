@@ -9,7 +9,7 @@ asks of the data, per panel and link budget:
   the same information (one step per hop);
 - every delayed design against the SLS bound (SLS on the complete graph at one
   hop per step), the best cost any controller with that information reaches;
-- cross-model context, marked as such: GRNN-Sparse against the instantaneous ℓ1
+- context across information models, marked as such: GRNN-Sparse against the instantaneous ℓ1
   gain and against the decentralized gain (no communication), GCNN against the
   instantaneous ℓ1 gain;
 - the pairs a spec asks for.
@@ -47,7 +47,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import stats
@@ -58,6 +58,7 @@ from .statistics import (
     best_within,
     front_quantiles,
     instances_by_panel,
+    median_interval,
     paired_difference,
     panel_budgets,
     panel_nodes,
@@ -65,7 +66,7 @@ from .statistics import (
 from .styles import GRNN_KINDS, Style, grnn_kinds, style_for
 
 __all__ = ["arm_labels", "UNCERTAIN_RSE", "BOUND_LABEL", "ALPHA", "PRACTICAL_MARGIN", "Comparison", "is_unresolved", "unresolved", "is_sls_bound",
-           "select_comparisons", "holm", "sign_test", "budgets_per_node"]
+           "select_comparisons", "holm", "sign_test", "budgets_per_node", "Pooled", "pooled_rows"]
 
 #: Above this relative standard error a simulated cost is unresolved: not a number to compare
 #: at the third digit (in the shipped reports every such cost came from rare divergent draws).
@@ -234,6 +235,9 @@ class Comparison:
     label_a, label_b : str or None
         The label each side is drawn under in the figures (None where the findings split
         a label the figures keep whole).
+    differences : tuple of float
+        The per-instance differences a − b behind ``paired`` (what :func:`pooled_rows` pools
+        over panels); empty for a comparison made by hand.
     """
 
     panel: tuple
@@ -257,6 +261,7 @@ class Comparison:
     drawn_b: float = math.inf
     label_a: str | None = None
     label_b: str | None = None
+    differences: tuple = field(default=(), compare=False, repr=False)
 
     def budget_tier(self, per_node: bool):
         """This cell's budget as figures and text name it: links, or links per node (see :func:`budgets_per_node`)."""
@@ -417,7 +422,7 @@ def _asked_plan(arms: Mapping[str, _Arm], pairs: Iterable, asked: set) -> list[t
 def _group(info_a: str, info_b: str) -> str:
     if info_a == info_b:
         return f"same information model: {info_a}"
-    return f"crosses models: {info_a} against {info_b}"
+    return f"different information: {info_a} against {info_b}"
 
 
 def _group_rank(group: str) -> tuple:
@@ -497,7 +502,7 @@ def select_comparisons(records, *, budgets=None, pairs=()) -> list[Comparison]:
                                  [full[(panel, x)] for x in (a, b)], k)
                 if out_k is None:
                     continue
-                paired, excluded = out_k
+                paired, excluded, differences = out_k
                 ia, ib = arms[a].info_model, arms[b].info_model
                 nodes = panel_node_count[panel]
                 per_node = None if budget is None or not nodes else budget / nodes
@@ -505,7 +510,7 @@ def select_comparisons(records, *, budgets=None, pairs=()) -> list[Comparison]:
                 out.append(Comparison(panel, a, b, budget, paired, "same" if ia == ib else "cross", ia, ib,
                                       sign_test(paired.a_wins, paired.b_wins), 1.0, excluded, group,
                                       len(panels[panel]), arms[a].method, arms[b].method, arms[a].style,
-                                      per_node, *drawn, *(drawn_labels.get(x) for x in (a, b))))
+                                      per_node, *drawn, *(drawn_labels.get(x) for x in (a, b)), differences))
     adjusted = holm([c.p_value for c in out])
     return [replace(c, p_holm=p) for c, p in zip(out, adjusted)]
 
@@ -535,7 +540,8 @@ def budgets_per_node(comparisons: Sequence[Comparison]) -> bool:
 
 
 def _compare(a, b, budget, kept, full, k):
-    """(Paired, instances changed by dropping unresolved costs), or None where no instance has both."""
+    """(Paired, instances changed by dropping unresolved costs, the differences a − b), or None where no instance
+    has both."""
     fa, fb = (t[:, k] for t in full)
     ka, kb = (t[:, k] if t is not None else np.full(fa.shape, np.nan) for t in kept)
     with np.errstate(invalid="ignore"):
@@ -544,4 +550,138 @@ def _compare(a, b, budget, kept, full, k):
         same = np.isfinite(ka) & np.isfinite(kb) & (ka == fa) & (kb == fb)
     if not paired.instances:
         return None
-    return paired, int((both_full & ~same).sum())
+    both = np.isfinite(ka) & np.isfinite(kb)
+    return paired, int((both_full & ~same).sum()), tuple(float(x) for x in ka[both] - kb[both])
+
+
+# --------------------------------------------------------------------------- pooled over panels
+
+
+@dataclass(frozen=True)
+class Pooled:
+    """One pair within one budget tier, pooled over the panels where it is compared: a row of the findings table.
+
+    The instances of every panel are taken together: the median of all their
+    differences a − b with a distribution-free 95 % interval (:func:`median_interval`),
+    and a stratified sign test (the wins counted in each panel and summed; under no
+    difference each instance is a fair coin whatever its panel, so the total is
+    binomial), Holm-adjusted over every pooled row of the report. A pair compared on one
+    panel only is that panel's cell, tested the same way.
+
+    Parameters
+    ----------
+    cells : tuple of Comparison
+        The per-panel cells pooled, in panel order.
+    paired : Paired
+        Median, interval, wins and instances over all of them.
+    p_value, p_holm : float
+        The stratified sign test, and it Holm-adjusted over the report's pooled rows.
+    tier : float or None
+        The budget (links, or links per node where the panels differ in size; None: any).
+    """
+
+    cells: tuple
+    paired: Paired
+    p_value: float
+    p_holm: float = 1.0
+    tier: float | None = None
+
+    a = property(lambda self: self.cells[0].a)
+    b = property(lambda self: self.cells[0].b)
+    group = property(lambda self: self.cells[0].group)
+    relation = property(lambda self: self.cells[0].relation)
+    info_a = property(lambda self: self.cells[0].info_a)
+    info_b = property(lambda self: self.cells[0].info_b)
+
+    @property
+    def panels(self) -> tuple:
+        return tuple(c.panel for c in self.cells)
+
+    @property
+    def too_few(self) -> bool:
+        return self.paired.too_few
+
+    @property
+    def equal(self) -> bool:
+        """As :attr:`Comparison.equal`: the pooled median within the margin, the interval excluding 0 or inside it."""
+        p, m = self.paired, PRACTICAL_MARGIN
+        if not abs(p.median) < m:
+            return False
+        return (-m < p.low and p.high < m) or not p.inconclusive
+
+    @property
+    def tested(self) -> bool:
+        return not self.too_few and not self.paired.inconclusive and self.p_holm < ALPHA
+
+    @property
+    def mixed(self) -> bool:
+        """Tested, beyond the margin, yet something shown orders the two the other way: on one panel, the budget
+        fronts as drawn (as :attr:`Comparison.mixed`); pooled over several, a panel whose interval excludes 0 on
+        the other side."""
+        if not self.tested or self.equal:
+            return False
+        return bool(self.against())
+
+    def against(self) -> list:
+        """The cells that order the two against the pooled median (see :attr:`mixed`)."""
+        m = self.paired.median
+        if len(self.cells) == 1:
+            return [c for c in self.cells if math.isfinite(c.drawn_a) and math.isfinite(c.drawn_b)
+                    and (c.drawn_a - c.drawn_b) * m < 0]
+        return [c for c in self.cells if not c.too_few and not c.paired.inconclusive and c.paired.median * m < 0]
+
+    @property
+    def significant(self) -> bool:
+        return self.tested and not self.equal and not self.mixed
+
+    @property
+    def verdict(self) -> str:
+        """As :attr:`Comparison.verdict`."""
+        if self.equal:
+            return "equal"
+        if self.too_few:
+            return "too few"
+        if self.mixed:
+            return "mixed"
+        if not self.significant:
+            return "no significant difference"
+        return "better" if self.paired.high < 0 else "worse"
+
+
+def _pool(cells: Sequence[Comparison], tier) -> Pooled:
+    """The pooled row of ``cells`` (one pair, one tier, one cell per panel), before Holm's adjustment."""
+    if len(cells) == 1:
+        c = cells[0]
+        return Pooled((c,), c.paired, c.p_value, c.p_value, tier)
+    c0 = cells[0]
+    a_wins = sum(c.paired.a_wins for c in cells)
+    b_wins = sum(c.paired.b_wins for c in cells)
+    n = sum(c.paired.instances for c in cells)
+    d = np.concatenate([np.asarray(c.differences, dtype=float) for c in cells])
+    if d.size == n:
+        low, high, coverage = median_interval(d)
+        median = float(np.median(d))
+    else:  # comparisons made by hand, without their differences: counts only
+        low = high = median = float("nan")
+        coverage = 0.0
+    paired = Paired(c0.a, c0.b, c0.budget, n, a_wins, b_wins, median, low, high, coverage)
+    p = sign_test(a_wins, b_wins)
+    return Pooled(tuple(cells), paired, p, p, tier)
+
+
+def pooled_rows(comparisons: Sequence[Comparison]) -> list[Pooled]:
+    """One :class:`Pooled` per pair and budget tier, over the panels where the pair is compared within it.
+
+    In the order of ``comparisons`` (pairs as the findings list them, then tiers in
+    increasing order, any number of links last); Holm-adjusted over all of them.
+    """
+    per_node = budgets_per_node(comparisons)
+    groups: dict[tuple, list] = {}
+    for c in comparisons:
+        groups.setdefault((c.group, c.a, c.b), {}).setdefault(c.budget_tier(per_node), []).append(c)
+    rows = []
+    for tiers in groups.values():
+        for tier in sorted(tiers, key=lambda t: math.inf if t is None else t):
+            rows.append(_pool(tiers[tier], tier))
+    adjusted = holm([r.p_value for r in rows])
+    return [replace(r, p_holm=q) for r, q in zip(rows, adjusted)]

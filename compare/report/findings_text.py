@@ -1,18 +1,23 @@
-"""The Findings section: one bullet per compared pair, its verdict first, from the forest plot's cells.
+"""The Findings section: one table of the compared pairs, pooled over panels, with the per-panel detail below it.
 
-Each verdict of :class:`compare.report.findings.Comparison` is worded one way: "beats" (the
-interval excludes 0, the Holm-adjusted sign test gives p < 0.05, the difference is
-beyond the practical margin and the budget fronts as drawn agree), "costs more/less …
-on k of n instances, not significant after Holm's correction" (the interval excludes 0
-only), "no clear difference" (the interval contains 0), "equal within 0.1 % of LQR's
-cost" (the median difference is inside :data:`compare.report.findings.PRACTICAL_MARGIN`: never
-"beats", never a count of wins), "mixed" (the typical instance favours one design, the
-median costs the other: both numbers are given); cells with too few instances for a
-95 % interval give counts only.
+Rows are the pairs (first − second), columns the link budgets; each cell is the median
+difference of best costs with its 95 % interval, k/n (the instances on which the
+difference has the median's sign) and a mark for its verdict
+(:attr:`compare.report.findings.Comparison.verdict`): ▲ / ▼ one beats the other (the
+first costs more / less: the interval excludes 0, the Holm-adjusted sign test gives
+p < 0.05, the difference is beyond the practical margin and the budget fronts as drawn
+agree), △ / ▽ the same direction without passing Holm's correction, ○ the interval holds
+0, = equal within 0.1 % of LQR's cost (never "beats"), ± mixed (the typical instance
+favours one design, the median costs the other), ? too few instances for an interval
+(counts only). The first table pools every panel (:func:`compare.report.findings.pooled_rows`);
+the second gives each panel's cell, the forest plot's rows. Bullets say only what a table
+cannot: mixed cells with both numbers, and what a pair's gap means where the pair alone
+does not say it. What no single cell can reach is said once, before the table.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -23,25 +28,35 @@ from .findings import (
     PRACTICAL_MARGIN,
     UNCERTAIN_RSE,
     Comparison,
+    Pooled,
     budgets_per_node,
+    pooled_rows,
 )
-from .names import join_words
+from .names import join_words, short_names
 
 __all__ = ["findings_markdown", "complete_plant_panels", "repaired_instances", "EQUAL_WORDS", "number_text",
-           "range_text", "side_of", "with_article", "short_label", "panel_names", "scope_text", "models_text"]
+           "range_text", "side_of", "with_article", "short_label", "panel_names", "scope_text", "models_text",
+           "estimate_text", "MARKS", "mark", "pair_name", "tier_header", "fixed_text"]
 
-# A cell's verdict, each worded one way in the text (defined in the Statistics line): "beats" (a claim: interval
-# excludes 0, Holm p < ALPHA, beyond the margin, the fronts agree), "costs more/less ..., not significant after Holm's
-# correction" (interval excludes 0 only), "mixed" (tested, but the fronts as drawn order the two the other way),
-# "equal within the margin", "no clear difference" (interval contains 0); and cells too small for an interval, given
-# as counts.
+# A cell's verdict, each marked one way in the table: "beats" (a claim: interval excludes 0, Holm p < ALPHA, beyond
+# the margin, the fronts agree), "direction" (interval excludes 0 only), "mixed" (tested, but the fronts as drawn order
+# the two the other way), "equal" within the margin, "unclear" (interval contains 0), and "few": too small for an
+# interval, counts only.
 _BEATS, _DIRECTION, _MIXED, _EQUAL, _UNCLEAR, _FEW = "beats", "direction", "mixed", "equal", "unclear", "few"
-#: The verdicts in the order a pair's headline is chosen (see :func:`_pair_bullet`).
-_HEADLINE_ORDER = (_BEATS, _DIRECTION, _MIXED, _EQUAL, _UNCLEAR, _FEW)
+#: The mark of each verdict in the tables; (verdict, side) where the side matters (+1: the first costs more).
+MARKS = {(_BEATS, 1): "▲", (_BEATS, -1): "▼", (_DIRECTION, 1): "△", (_DIRECTION, -1): "▽", _MIXED: "±",
+         _EQUAL: "=", _UNCLEAR: "○", _FEW: "?"}
 _NOT_SIGNIFICANT = "not significant after Holm's correction"
 #: How an "equal" cell is worded, everywhere.
 EQUAL_WORDS = f"equal within {100 * PRACTICAL_MARGIN:g} % of LQR's cost"
 _NORM_PREFIX = "‖A‖₂ = "
+#: No more decimals than this: 1e-4 of LQR's cost is a tenth of the practical margin, below what the solvers and
+#: the simulated costs resolve.
+_MAX_DECIMALS = 4
+_NBSP = "\u00a0"
+
+
+# --------------------------------------------------------------------------- numbers
 
 
 def number_text(x: float) -> str:
@@ -53,20 +68,62 @@ def number_text(x: float) -> str:
     return "−" + text[1:] if text.startswith("-") else text
 
 
-def _p(p: float) -> str:
-    return f"{p:.2g}"
+def _decimals(low: float, high: float) -> int:
+    """Decimals that give the interval's width two significant digits (at most :data:`_MAX_DECIMALS`)."""
+    width = high - low
+    if not (math.isfinite(width) and width > 0):
+        return _MAX_DECIMALS
+    return int(min(max(1 - _exponent(width), 0), _MAX_DECIMALS))
 
 
-def _span(values: Iterable) -> str:
-    """"9–10", or "10" when they agree."""
-    values = sorted(set(values))
-    return str(values[0]) if len(values) == 1 else f"{values[0]}–{values[-1]}"
+def _exponent(x: float) -> int:
+    """The decimal exponent of ``x`` at two significant digits (0.0999999 is 0.10: −1, not −2)."""
+    return int(f"{abs(x):.1e}".split("e")[1])
+
+
+def fixed_text(x: float, decimals: int) -> str:
+    """``x`` signed at ``decimals`` decimals, a true minus; "0" where it rounds to zero (never "−0.0000")."""
+    text = f"{x:+,.{decimals}f}"
+    if float(text.replace(",", "")) == 0:
+        return "0"
+    return "−" + text[1:] if text.startswith("-") else text
+
+
+def _alone(x: float) -> str:
+    """A median without an interval: two significant digits, at most :data:`_MAX_DECIMALS` decimals ("0" below)."""
+    if x == 0:
+        return "0"
+    return fixed_text(x, int(min(max(1 - _exponent(x), 0), _MAX_DECIMALS)))
+
+
+def estimate_text(p, *, coverage: bool = False) -> str:
+    """"+0.0127 [+0.0102, +0.0147]": a median with its interval, at the precision the interval supports.
+
+    Too few instances for a 95 % interval: the median alone, at two significant digits, unless
+    ``coverage``, where the interval follows with its achieved coverage ("(88%)") if that is at
+    least 50 %. "—" without instances.
+    """
+    if not p.instances or not math.isfinite(p.median):
+        return "—"
+    if p.too_few and not (coverage and p.coverage >= 0.5):
+        return _alone(p.median)
+    d = _decimals(p.low, p.high)
+    # A bound that is not 0 never prints as "0": more decimals, up to the most the costs resolve.
+    while d < _MAX_DECIMALS and any(x != 0 and fixed_text(x, d) == "0" for x in (p.low, p.high)):
+        d += 1
+    # (a narrow page may break the interval after its comma: four budgets of them fit 800 px)
+    text = f"{fixed_text(p.median, d)} [{fixed_text(p.low, d)}, {fixed_text(p.high, d)}]"
+    return text + (f" ({p.coverage:.0%})" if p.too_few else "")
 
 
 def range_text(values: Sequence[float]) -> str:
     """"+0.018 to +0.082", or one number where they round alike."""
     low, high = number_text(min(values)), number_text(max(values))
     return low if low == high else f"{low} to {high}"
+
+
+def _p(p: float) -> str:
+    return f"{p:.2g}"
 
 
 def _plural(k: int, word: str) -> str:
@@ -78,9 +135,11 @@ def _s(k: int) -> str:
     return "" if k == 1 else "s"
 
 
+# --------------------------------------------------------------------------- verdicts
 
-def _level(c: Comparison) -> str:
-    """The cell's verdict as the text words it (the order of :attr:`Comparison.verdict`)."""
+
+def evidence_level(c) -> str:
+    """The verdict of a cell or pooled row as the tables mark it (the order of :attr:`Comparison.verdict`)."""
     if c.equal:
         return _EQUAL
     if c.too_few:
@@ -92,15 +151,41 @@ def _level(c: Comparison) -> str:
     return _BEATS if c.significant else _DIRECTION
 
 
-def side_of(c: Comparison) -> int:
+def side_of(c) -> int:
     """−1 where a costs less than b, +1 where it costs more (by the interval, else by the wins), 0: split.
 
     For a mixed cell, the side the typical instance (the paired median) favours.
     """
     p = c.paired
-    if _level(c) in (_BEATS, _DIRECTION, _MIXED):
+    if evidence_level(c) in (_BEATS, _DIRECTION, _MIXED):
         return -1 if p.median < 0 else 1
     return int(np.sign(p.b_wins - p.a_wins))
+
+
+def mark(c) -> str:
+    """The mark of a cell or pooled row (:data:`MARKS`)."""
+    level = evidence_level(c)
+    return MARKS[(level, side_of(c))] if level in (_BEATS, _DIRECTION) else MARKS[level]
+
+
+def agreeing_count(c) -> int:
+    """The instances whose difference has the median's sign (the larger side's wins where the median is 0)."""
+    p = c.paired
+    if not math.isfinite(p.median) or p.median == 0:
+        return max(p.a_wins, p.b_wins)
+    return p.a_wins if p.median < 0 else p.b_wins
+
+
+def _cell(c) -> str:
+    """"+0.0127<br>[+0.0102, +0.0147]<br>10/10 ▲": the median, its interval, then k/n and the mark, a line each
+    (so that a wide page keeps each interval on one line, and a narrow one breaks it after its comma)."""
+    if c is None:
+        return ""
+    estimate = estimate_text(c.paired).replace(" [", "<br>[", 1)
+    return f"{estimate}<br>{agreeing_count(c)}/{c.paired.instances}{_NBSP}{mark(c)}"
+
+
+# --------------------------------------------------------------------------- names
 
 
 def with_article(label: str) -> str:
@@ -114,7 +199,7 @@ def _strip(label: str) -> str:
 
 
 def short_label(label: str, other: str) -> str:
-    """The name in a bullet's body, once its headline has given the full one: without the trailing parenthesis,
+    """The name in a sentence's body, once it has given the full one: without the trailing parenthesis,
     unless that leaves it a prefix of the other's (SLS against the SLS bound)."""
     mine, theirs = _strip(label), _strip(other)
     if mine.startswith(theirs) or theirs.startswith(mine):
@@ -129,7 +214,9 @@ def panel_names(panels: Sequence[tuple]) -> dict[tuple, str]:
     out = {}
     for family, n, a_norm in panels:
         parts = [] if len(families) == 1 or a_norm is not None else [str(family)]
-        if len(sizes) > 1 or (a_norm is None and len(families) == 1):
+        # N where it tells panels apart: a family at several sizes ("chain, N = 20"), not a grid of its own ("wecc")
+        several = len({p[1] for p in panels if p[0] == family}) > 1
+        if (len(sizes) > 1 and (a_norm is not None or several)) or (a_norm is None and len(families) == 1):
             parts.append(f"N = {n}")
         if a_norm is not None:
             parts.append(f"{_NORM_PREFIX}{a_norm:g}")
@@ -155,6 +242,20 @@ def _in_panels(panels: Sequence[tuple], names: Mapping, every: bool = True) -> s
     return f" in {len(panels)} of {total} panels"
 
 
+def tier_header(tier, per_node: bool) -> str:
+    """A budget column's header: "≤ 20 links", "≤ 1 link per node", "any"."""
+    if tier is None:
+        return "any"
+    return f"≤ {tier:g} link{'' if tier == 1 else 's'}{' per node' if per_node else ''}"
+
+
+def tier_phrase(tier, per_node: bool) -> str:
+    """"within 20 links", "within 1 link per node", "with any number of links"."""
+    if tier is None:
+        return "with any number of links"
+    return "within " + tier_header(tier, per_node).removeprefix("≤ ")
+
+
 def _budgets_phrase(budgets: Sequence, per_node: bool = False) -> str:
     """"at ≤ 20 and ≤ 60 links and overall" (overall: any number of links); "links per node" with ``per_node``."""
     finite = [f"≤ {b:g}" for b in budgets if b is not None]
@@ -166,11 +267,7 @@ def _budgets_phrase(budgets: Sequence, per_node: bool = False) -> str:
 
 
 def _where(cells: Sequence[Comparison], names: Mapping, every: bool = True) -> str:
-    """Where ``cells`` lie: their budgets, grouped by the panels each holds in, the widest first.
-
-    Without ``every``, a budget held in every panel goes unqualified ("at ≤ 20 links"): the
-    trailing sentences of a bullet, after its headline has said how many panels there are.
-    """
+    """Where ``cells`` lie: their budgets, grouped by the panels each holds in, the widest first."""
     order = list(names)
     per_node = budgets_per_node(cells)
     held: dict = {}
@@ -183,9 +280,9 @@ def _where(cells: Sequence[Comparison], names: Mapping, every: bool = True) -> s
     return join_words([_budgets_phrase(budgets, per_node) + _in_panels(panels, names, every) for panels, budgets in ranked])
 
 
-
 def scope_text(lead: Sequence[Comparison], cells: Sequence[Comparison], names: Mapping) -> str:
-    """Where the headline holds; "in every panel but one" when the exceptions share one panel of three or more."""
+    """Where the headline holds; "in every panel but ‖A‖₂ = 1.2" when the exceptions share one panel of three or
+    more (the one named)."""
     mine = {id(c) for c in lead}
     rest = [c for c in cells if id(c) not in mine]
     odd = {c.panel for c in rest}
@@ -194,113 +291,27 @@ def scope_text(lead: Sequence[Comparison], cells: Sequence[Comparison], names: M
     others = {p for p in names if p not in odd}
     complete = all(any(c.panel == p and c.budget_tier(per_node) == b for c in lead) for p in others for b in budgets)
     if len(odd) == 1 and len(names) >= 3 and complete:
-        return f"{_budgets_phrase(budgets, per_node)} in every panel but one"
+        return f"{_budgets_phrase(budgets, per_node)} in every panel but {names[next(iter(odd))]}"
     return _where(lead, names)
 
 
-def _loc(c: Comparison, names: Mapping) -> str:
-    return ", ".join(x for x in (names[c.panel], _budgets_phrase([c.budget]).removeprefix("at ")) if x)
+_INFO_WORDS = {"delayed": "delayed", "instantaneous": "instantaneous", "none": "none"}
 
 
-def _n_phrase(cells: Sequence[Comparison]) -> str:
-    """"n = 30", "n = 17–30 per cell", and the exact count of pairings unresolved costs changed (the Statistics
-    line says why)."""
-    many = len(cells) > 1
-    text = f"n = {_span(c.paired.instances for c in cells)}" + (" per cell" if many else "")
-    changed = [c.excluded for c in cells if c.excluded]
-    if changed and many and len(changed) == len(cells) and len(set(changed)) == 1:
-        text += f", {changed[0]} re-paired per cell"
-    elif changed and many:
-        text += f", {_span(changed)} re-paired in {len(changed)} of the {len(cells)} cells"
-    elif changed:
-        text += f", {changed[0]} re-paired"
-    return text
-
-
-_INFO_WORDS = {"delayed": "delayed", "instantaneous": "instantaneous", "none": "no communication"}
-
-
-def models_text(c: Comparison, first: str | None = None) -> str:
-    """The information models: "(both delayed)", or the marker of a cross-model claim, the models in the order in
-    which the sentence names the designs (``first`` named first; by default a, then b)."""
+def models_text(c, first: str | None = None) -> str:
+    """The information models: "(both delayed)", or "(information: delayed vs instantaneous)" where the designs see
+    different information ("none": no communication), in the order in which the sentence names them (``first``
+    named first; by default a, then b)."""
     ia, ib = (_INFO_WORDS.get(x, x) for x in (c.info_a, c.info_b))
     if first is not None and first == c.b and first != c.a:
         ia, ib = ib, ia
-    return f"(both {ia})" if c.relation == "same" else f"(crosses models: {ia} vs {ib})"
+    return f"(both {ia})" if c.relation == "same" else f"(information: {ia} vs {ib})"
 
 
-def _holm(cells: Sequence[Comparison], bound: str) -> str:
-    """"Holm p ≤ 0.002" over claims (the largest), "Holm p ≥ 0.094" otherwise (the smallest); "=" for one cell."""
-    values = [c.p_holm for c in cells]
-    value = max(values) if bound == "≤" else min(values)
-    return f"Holm p {bound if len(cells) > 1 else '='} {_p(value)}"
-
-
-def _wins(cells: Sequence[Comparison], side: int) -> str:
-    """"on 10 of 10 instances", "on all 9–10 instances", "on at least 8 of 9–10 instances": a's side of the wins."""
-    counts = [(c.paired.a_wins if side < 0 else c.paired.b_wins, c.paired.instances) for c in cells]
-    most = max(n for _, n in counts)
-    if len(set(counts)) == 1:
-        return f"on {counts[0][0]} of {counts[0][1]} instance{_s(counts[0][1])}"
-    if all(k == n for k, n in counts):
-        return f"on all {_span(n for _, n in counts)} instance{_s(most)}"
-    return f"on at least {min(k for k, _ in counts)} of {_span(n for _, n in counts)} instance{_s(most)}"
-
-
-def _weakest(cells: Sequence[Comparison]) -> Comparison:
-    """The cell whose interval comes closest to 0: it bounds every claim of its bullet."""
-    return min(cells, key=lambda c: min(abs(c.paired.low), abs(c.paired.high)))
-
-
-def _beats_sentence(lead, cells, names, side) -> str:
-    """"**W beats L** (both delayed) at …: L costs +x to +y more (weakest …; n …; Holm p ≤ …)."."""
-    c0 = lead[0]
-    a, b = c0.a, c0.b
-    winner, loser = (a, b) if side < 0 else (b, a)
-    beaten_by_bound = b == BOUND_LABEL and side > 0
-    verdict = f"{a} is beaten by the {b}" if beaten_by_bound else f"{with_article(winner)} beats {with_article(loser)}"
-    margins = [side * c.paired.median for c in lead]  # loser − winner: positive
-    # The information models in the order the verdict names the designs.
-    models = models_text(c0, a if beaten_by_bound else winner)
-    text = (f"**{verdict}** {models} {scope_text(lead, cells, names)}: {short_label(loser, winner)} costs "
-            f"{range_text(margins)} more")
-    weak = _weakest(lead)
-    low, high = sorted(side * v for v in (weak.paired.low, weak.paired.high))
-    interval = f"[{number_text(low)}, {number_text(high)}]"
-    where = f"weakest {number_text(side * weak.paired.median)} {interval}, {_loc(weak, names)}" if len(lead) > 1 \
-        else f"95 % interval {interval}"
-    return text + f" ({where}; {_n_phrase(lead)}; {_holm(lead, '≤')})."
-
-
-def _direction_sentence(lead, cells, names, side, k) -> str:
-    """"**A costs more than B on 10 of 10 instances** (…) at …, +x to +y; not significant after Holm's …"."""
-    c0 = lead[0]
-    word = "less" if side < 0 else "more"
-    verdict = f"{c0.a} costs {word} than {with_article(c0.b)} {_wins(lead, side)}"
-    medians = [c.paired.median for c in lead]
-    return (f"**{verdict}** {models_text(c0)} {scope_text(lead, cells, names)}, {range_text(medians)}; {_NOT_SIGNIFICANT} "
-            f"over K = {_plural(k, 'comparison')} ({_holm(lead, '≥')}).")
-
-
-def _difference(c0: Comparison) -> str:
-    """"GRNN-Sparse − SLS bound": the paired difference's two sides, short."""
-    return f"{short_label(c0.a, c0.b)} − {short_label(c0.b, c0.a).removeprefix('the ')}"
-
-
-def _unclear_sentence(lead, cells, names) -> str:
-    c0 = lead[0]
-    return (f"**No clear difference between {c0.a} and {with_article(c0.b)}** {models_text(c0)} {scope_text(lead, cells, names)}: "
-            f"median {_difference(c0)} {range_text([c.paired.median for c in lead])} ({_n_phrase(lead)}).")
-
-
-def _equal_sentence(lead, cells, names) -> str:
-    """"**A and B are equal within 0.1 % of LQR's cost** (…) at …: median A − B x to y (n …)."
-
-    Never a count of wins: a difference below the margin is no win.
-    """
-    c0 = lead[0]
-    return (f"**{c0.a} and {with_article(c0.b)} are {EQUAL_WORDS}** {models_text(c0)} {scope_text(lead, cells, names)}: "
-            f"median {_difference(c0)} {range_text([c.paired.median for c in lead])} ({_n_phrase(lead)}).")
+def pair_name(a: str, b: str, short: Mapping[str, str] | None = None) -> str:
+    """"GRNN-Sparse − Sparse delayed K (l1)": a pair as its rows name it (labels shortened where ``short`` says)."""
+    short = short or {}
+    return f"{short.get(a, a)} − {short.get(b, b)}"
 
 
 def _digits(x: float, y: float) -> tuple[str, str]:
@@ -312,111 +323,59 @@ def _digits(x: float, y: float) -> tuple[str, str]:
     return tx, ty
 
 
-def _mixed_clause(cells: Sequence[Comparison], names: Mapping, *, where: bool) -> str:
-    """What a group of mixed cells (one side for the typical instance) says, both numbers given:
-    "A costs less on 27 of 30 instances (median paired difference A − B −0.0014), yet B has the lower median
-    cost (1.0889 against A's 1.0896)"."""
-    c0 = cells[0]
-    side = side_of(c0)
-    typical, other = (c0.a, c0.b) if side < 0 else (c0.b, c0.a)
-    t_short, o_short = short_label(typical, other), short_label(other, typical)
-    drawn = []
-    for c in cells:
-        mine, theirs = (c.drawn_a, c.drawn_b) if typical == c.a else (c.drawn_b, c.drawn_a)
-        t_text, o_text = _digits(mine, theirs)
-        drawn.append(f"{o_text} against {t_text}" + (f" on {_loc(c, names)}" if where and len(cells) > 1 else ""))
-    return (f"{t_short} costs less {_wins(cells, side)} (median paired difference {_difference(c0)} "
-            f"{range_text([c.paired.median for c in cells])}; {_holm(cells, '≤')}), yet {o_short} has the lower median "
-            f"cost ({'; '.join(drawn)})")
+# --------------------------------------------------------------------------- bullets: what a table cannot say
 
 
-def _mixed_sentence(lead, cells, names) -> str:
-    """"**Mixed between A and B** (…) at …: the typical instance and the median costs disagree: A costs less on
-    27 of 30 instances (…), yet B has the lower median cost (…)."."""
-    c0 = lead[0]
-    return (f"**Mixed between {c0.a} and {with_article(c0.b)}** {models_text(c0)} {scope_text(lead, cells, names)}: the typical "
-            f"instance and the median costs disagree: {_mixed_clause(lead, names, where=True)}.")
+#: A bullet never runs longer than this many words.
+BULLET_WORDS = 60
 
 
-def _counts(cells: Sequence[Comparison], subject: str, side: int) -> str:
-    """"GRNN-Sparse costs more on 3 of 4 and 2 of 2", or for many cells a tally of the cells by direction."""
-    word = "less" if side < 0 else "more"
-    if len(cells) <= 3:
-        shown = [f"{c.paired.a_wins if side < 0 else c.paired.b_wins} of {c.paired.instances}" for c in cells]
-        return f"{subject} costs {word} on {join_words(shown)}"
-    same = sum(1 for c in cells if (c.paired.a_wins if side < 0 else c.paired.b_wins) == c.paired.instances)
-    other = sum(1 for c in cells if (c.paired.b_wins if side < 0 else c.paired.a_wins) == c.paired.instances)
-    most = max(c.paired.instances for c in cells)
-    text = f"{subject} costs {word} on every instance in {same} of {len(cells)} cells"
-    if other:
-        text += f", {'more' if side < 0 else 'less'} on every instance in {other}"
-    return text + f" ({_span(c.paired.instances for c in cells)} instance{_s(most)} per cell)"
+def _drawn_pair(c, typical: str) -> str:
+    """"1.0889 against 1.0896": the other side's drawn median cost, then the typical side's."""
+    mine, theirs = (c.drawn_a, c.drawn_b) if typical == c.a else (c.drawn_b, c.drawn_a)
+    t_text, o_text = _digits(mine, theirs)
+    return f"{o_text} against {t_text}"
 
 
-def _few_sentence(lead, names) -> str:
-    c0 = lead[0]
-    side = 1 if sum(side_of(c) for c in lead) >= 0 else -1
-    return (f"**Too few instances to compare {c0.a} and {with_article(c0.b)}** {models_text(c0)} {_where(lead, names)}: "
-            f"{_counts(lead, short_label(c0.a, c0.b), side)}, with no 95 % interval.")
+def _mixed_items(cells: Sequence[Comparison], rows: Sequence[Pooled], names: Mapping, per_node: bool,
+                 keep: int) -> list[str]:
+    """One clause per mixed pooled row and per mixed cell (at most ``keep`` of each): both numbers, where each holds."""
+    items = []
+    for r in rows[:keep]:
+        typical, other = (r.a, r.b) if r.paired.median < 0 else (r.b, r.a)
+        k = r.paired.a_wins if r.paired.median < 0 else r.paired.b_wins
+        first, *more = r.against()
+        also = f" (and on {_plural(len(more), 'other panel')})" if more else ""
+        items.append(f"pooled {tier_phrase(r.tier, per_node)}, {short_label(typical, other)} costs less on {k} of "
+                     f"{r.paired.instances} instances, yet on {names[first.panel]}{also} "
+                     f"{short_label(other, typical)} costs less (median {number_text(first.paired.median)})")
+    for c in cells[:keep]:
+        typical, other = (c.a, c.b) if c.paired.median < 0 else (c.b, c.a)
+        k = c.paired.a_wins if c.paired.median < 0 else c.paired.b_wins
+        where = ", ".join(x for x in (names[c.panel], tier_phrase(c.budget, False)) if x)
+        items.append(f"on {where}, {short_label(typical, other)} costs less on {k} of {c.paired.instances} "
+                     f"instances (median {number_text(c.paired.median)}), yet {short_label(other, typical)} has the "
+                     f"lower median cost ({_drawn_pair(c, typical)})")
+    return items
 
 
-def _rest_sentences(rest, names, level: str, side: int) -> list[str]:
-    """Short sentences on the cells the headline leaves out, by verdict."""
-    if not rest:
-        return []
-    c0 = rest[0]
-    out = []
-    beaten = [c for c in rest if _level(c) == _BEATS]
-    if beaten:  # the opposite of the headline, significant: a claim of its own
-        flip = side_of(beaten[0])
-        winner, loser = (c0.a, c0.b) if flip < 0 else (c0.b, c0.a)
-        out.append(f"But **{with_article(winner)} beats {with_article(loser)}** {_where(beaten, names, False)} "
-                   f"({range_text([flip * c.paired.median for c in beaten])}; {_holm(beaten, '≤')}).")
-    for same, what in ((True, "Same direction"), (False, "Opposite direction")):
-        cells = [c for c in rest if _level(c) == _DIRECTION and (side_of(c) == side) == same]
-        if cells:
-            out.append(f"{what}, {_NOT_SIGNIFICANT}, {_where(cells, names, False)} ({_holm(cells, '≥')}).")
-    for typical in (-1, 1):  # the typical instance favours a, then b
-        mixed = [c for c in rest if _level(c) == _MIXED and side_of(c) == typical]
-        if mixed:
-            out.append(f"Mixed {_where(mixed, names, False)}: {_mixed_clause(mixed, names, where=True)}.")
-    equal = [c for c in rest if _level(c) == _EQUAL]
-    if equal:
-        out.append(f"{EQUAL_WORDS[0].upper()}{EQUAL_WORDS[1:]} {_where(equal, names, False)}.")
-    unclear = [c for c in rest if _level(c) == _UNCLEAR]
-    if unclear and level != _UNCLEAR:
-        out.append(f"No clear difference {_where(unclear, names, False)}.")
-    few = [c for c in rest if _level(c) == _FEW]
-    if few:
-        # Their counts (on at most 5 instances) cannot move a tested claim: the forest plot has them.
-        out.append(f"Too few instances {_where(few, names, False)}.")
-    return out
+def _mixed_bullet(name: str, cells: Sequence[Comparison], rows: Sequence[Pooled], names: Mapping,
+                  per_node: bool) -> str:
+    """"**A − B, mixed (±)**: …": the typical instance and the median costs disagree, both numbers given."""
+    more = len(cells) + len(rows)
+    for keep in (2, 1):
+        items = _mixed_items(cells, rows, names, per_node, keep)
+        rest = more - len(items)
+        text = (f"**{name}, mixed ({MARKS[_MIXED]})**: {'; '.join(items)}"
+                + (f"; {rest} more in the detail table" if rest else "") + ".")
+        if _words(text) <= BULLET_WORDS:
+            return text
+    return text
 
 
-def _pair_bullet(cells: Sequence[Comparison], names: Mapping, k: int, complete_plant=frozenset()) -> str:
-    """One bullet on one pair over its panels and budgets: a bold verdict, then the cells it leaves out."""
-    by_level = {level: [c for c in cells if _level(c) == level] for level in _HEADLINE_ORDER}
-    tested = [x for x in (_BEATS, _DIRECTION, _MIXED) if by_level[x]]
-    # A tested verdict leads; otherwise the verdict most cells have (equal, unclear, too few, in that order on ties).
-    level = tested[0] if tested else max((_EQUAL, _UNCLEAR, _FEW), key=lambda x: len(by_level[x]))
-    pool = by_level[level]
-    side = 0
-    if level in (_BEATS, _DIRECTION, _MIXED):
-        votes = [side_of(c) for c in pool]
-        side = -1 if votes.count(-1) > votes.count(1) else 1
-        lead = [c for c in pool if side_of(c) == side]
-        head = {_BEATS: lambda: _beats_sentence(lead, cells, names, side),
-                _DIRECTION: lambda: _direction_sentence(lead, cells, names, side, k),
-                _MIXED: lambda: _mixed_sentence(lead, cells, names)}[level]()
-    else:
-        lead = pool
-        head = {_EQUAL: lambda: _equal_sentence(lead, cells, names),
-                _UNCLEAR: lambda: _unclear_sentence(lead, cells, names),
-                _FEW: lambda: _few_sentence(lead, names)}[level]()
-    mine = {id(c) for c in lead}
-    parts = [head] + _rest_sentences([c for c in cells if id(c) not in mine], names, level, side)
-    note = _note(cells, names, complete_plant)
-    return " ".join(parts + ([note] if note else []))
+def _words(text: str) -> int:
+    """Words as the limits count them: whitespace-separated tokens with a letter or digit."""
+    return sum(1 for w in text.split() if any(ch.isalnum() for ch in w))
 
 
 # What a gap means, where the pair alone does not say it.
@@ -447,31 +406,79 @@ def _note(cells: Sequence[Comparison], names: Mapping, complete_plant) -> str:
             "and the two are one design.")
 
 
-_CAPTION = ("Each row is one cell (pair, panel, link budget): the median over instances of the paired difference of "
-            "best costs, first − second (LQR-normalized; negative: the first costs less), and its 95 % interval. "
-            "Filled: one beats the other; hollow: " + _NOT_SIGNIFICANT + ", no clear difference, " + EQUAL_WORDS
-            + ", or mixed; grey: too few instances for an interval.")
+# --------------------------------------------------------------------------- paragraphs
 
 
-def _power_note(comparisons: Sequence[Comparison]) -> str:
-    """Where no sign test on these instance counts can pass Holm's correction: say so before the claims."""
+def _power_note(comparisons: Sequence[Comparison], rows: Sequence[Pooled]) -> str:
+    """Where no per-panel sign test on these instance counts can pass Holm's correction: said once, before the table,
+    with what the pooled rows can reach."""
     k = len(comparisons)
     most = max(c.paired.instances for c in comparisons)
     smallest = 2 * 0.5 ** most  # the smallest p a sign test on `most` instances can give
     if min(1.0, k * smallest) < ALPHA:
         return ""
-    return (f"With at most {_plural(most, 'instance')} per cell no sign test goes below p = {_p(smallest)}, so none "
-            f"can pass Holm's correction over K = {_plural(k, 'comparison')}: these data show directions, not "
-            "significance.")
+    pooled = [r for r in rows if len(r.cells) > 1]
+    several = len({c.panel for c in comparisons}) > 1
+    text = (f"No {'single panel' if several else 'test'} can show significance here: with at most "
+            f"{_plural(most, 'instance')} per {'panel and ' if several else ''}budget the smallest sign-test p is "
+            f"{_p(smallest)}, and Holm's correction over the K = {_plural(k, 'per-panel test' if several else 'test')} "
+            f"asks for p < {_p(ALPHA / k)}.")
+    if pooled and any(not r.too_few for r in pooled):
+        text += " The pooled rows are where the evidence is."
+    elif pooled:
+        most = max(r.paired.instances for r in pooled)
+        text += f" Pooled over panels, a row still has at most {_plural(most, 'instance')}: too few for an interval."
+    return text
+
+
+def _legend(pooled: bool) -> str:
+    """What a cell says and what each mark means, once."""
+    text = ("Each cell: the median over instances of the first design's best cost within the budget minus the "
+            "second's (× LQR's cost; negative: the first costs less), its 95 % interval, and k/n: the instances, of "
+            f"n, on the median's side. {MARKS[(_BEATS, 1)]} / {MARKS[(_BEATS, -1)]}: the first costs more / less, "
+            f"passing Holm's correction (one beats the other); {MARKS[(_DIRECTION, 1)]} / "
+            f"{MARKS[(_DIRECTION, -1)]}: the interval excludes 0 without passing it; {MARKS[_UNCLEAR]}: the "
+            f"interval holds 0; {MARKS[_EQUAL]}: {EQUAL_WORDS}; {MARKS[_MIXED]}: mixed; {MARKS[_FEW]}: too few "
+            "instances for an interval.")
+    if pooled:
+        text += " A row pools every panel where the pair is compared; the detail below gives each panel."
+    return text
+
+
+#: Words in design names a control researcher may not know: (what to look for in a label, its definition in one
+#: sentence). Each is defined once, under the findings table, where the names first appear.
+_GLOSSARY = (
+    (("β path", "γ path"), "*β path* (*γ path*): the designs a method returns as the weight β (γ) of its penalty on "
+                           "links sweeps a grid"),
+    (("Per-node",), "*per-node*: one output layer (*readout*) per node, where the paper's GRNN shares one"),
+    (("warm start",), "*warm start*: training from a delayed static design on the instance, not random weights"),
+    (("diagonal start",), "*diagonal start*: training from the diagonal gain"),
+    (("Linear",), "*linear*: the GRNN with its tanh replaced by the identity"),
+    (("GraSP",), "*GraSP* (gradient support pursuit): a search for the best gain with at most a given number of "
+                 "links"),
+    ((BOUND_LABEL,), "*SLS bound*: SLS on the complete graph at one hop per step, the lowest cost any controller "
+                     "with the delayed information reaches"),
+)
+
+
+def _glossary(labels: Iterable[str]) -> str:
+    """"Names: *β path* …; *per-node* …": the words of :data:`_GLOSSARY` that the compared designs' names use."""
+    labels = list(labels)
+    used = [text for keys, text in _GLOSSARY if any(k in x for x in labels for k in keys)]
+    return ("Names: " + "; ".join(used) + ".") if used else ""
+
+
+_CAPTION = ("The forest plot draws each panel's cells: the median difference as a marker, its interval as a bar; "
+            "filled where one design beats the other, hollow otherwise, grey where too few instances.")
 
 
 def _unresolved_text(comparisons: Sequence[Comparison], excluded_total: int | None,
                      repaired_instances: int | None = None) -> str:
-    """What dropping unresolved costs did, in exact counts: designs dropped, (cell, instance) pairings changed,
-    and over how many instances (where the records are known)."""
+    """What dropping unresolved costs did, in exact counts: designs dropped, (panel, budget, instance) pairings
+    changed, and over how many instances (where the records are known)."""
     changed = sum(c.excluded for c in comparisons)
     rse = f"standard error > {UNCERTAIN_RSE * 100:g} % of the cost"
-    pairings = f"{changed} (cell, instance) pairing{_s(changed)}"
+    pairings = f"{changed} (panel, budget, instance) pairing{_s(changed)}"
     if repaired_instances is not None:
         pairings += f" over {_plural(repaired_instances, 'instance')}"
     if excluded_total:
@@ -488,17 +495,74 @@ def _unresolved_text(comparisons: Sequence[Comparison], excluded_total: int | No
     return f"No simulated cost was unresolved ({rse})."
 
 
-def _statistics_line(comparisons: Sequence[Comparison], excluded_total, repaired_instances) -> str:
-    """How the claims are tested, each verdict defined once (the margin with its reasons)."""
+def _statistics_line(comparisons: Sequence[Comparison], rows: Sequence[Pooled], excluded_total,
+                     repaired_instances) -> str:
+    """How the cells are tested, the families of Holm's correction, equal and mixed defined once."""
     k = len(comparisons)
-    return (f"Statistics: per cell, a distribution-free 95 % interval for the median difference (not simultaneous) "
-            f"and an exact sign test on the wins, Holm-corrected over K = {_plural(k, 'comparison')} (Holm p). "
-            f"**Beats**: interval excludes 0, Holm p < {ALPHA:g}; **costs more/less**, {_NOT_SIGNIFICANT}: interval "
-            f"excludes 0, Holm p ≥ {ALPHA:g}; **no clear difference**: interval contains 0; **{EQUAL_WORDS}**: "
-            "median difference below that margin, interval excluding 0 or inside it (the paper's third decimal; "
-            "above the solvers' tolerances and the simulated costs' standard errors); **mixed**: a difference beyond "
-            "the margin that the median costs drawn in the budget fronts reverse, so neither is claimed better. "
+    pooled = len(rows) != k or any(len(r.cells) > 1 for r in rows)
+    families = (f"over the R = {len(rows)} pooled rows and, separately, the K = {_plural(k, 'per-panel test')}"
+                if pooled else f"over the K = {_plural(k, 'comparison')}")
+    return (f"Statistics: distribution-free intervals (order statistics, not simultaneous) and exact sign tests on "
+            f"the wins{', summed over panels in a pooled row' if pooled else ''}, Holm-corrected {families} "
+            f"(family-wise level {ALPHA:g}). **{EQUAL_WORDS[0].upper() + EQUAL_WORDS[1:]}**: the median below that "
+            "margin (the paper's third decimal; above the solvers' tolerances and the simulated costs' standard "
+            "errors), the interval excluding 0 or inside it. **Mixed**: tested, but the median costs the figures "
+            "draw on a panel, or a panel's own interval, order the two the other way. "
             f"{_unresolved_text(comparisons, excluded_total, repaired_instances)}")
+
+
+# --------------------------------------------------------------------------- tables
+
+
+def _tiers(comparisons: Sequence[Comparison], per_node: bool) -> list:
+    tiers = {c.budget_tier(per_node) for c in comparisons}
+    return sorted(tiers, key=lambda t: math.inf if t is None else t)
+
+
+def _header(first: str, tiers: Sequence, per_node: bool) -> list[str]:
+    return [f"| {first} | " + " | ".join(tier_header(t, per_node) for t in tiers) + " |",
+            "|---|" + "---|" * len(tiers)]
+
+
+def _row_label(name: str, cells: Sequence[Comparison], names: Mapping) -> str:
+    """The pair, then what a reader needs beside it: the information models where they differ, the panels where
+    the pair is compared on only some."""
+    c0 = cells[0]
+    extra = []
+    if c0.relation != "same":
+        extra.append(models_text(c0).strip("()"))
+    panels = list(dict.fromkeys(c.panel for c in cells))
+    if len(names) > 1 and len(panels) < len(names):
+        extra.append(f"on {_panel_list(panels, names)}" if len(panels) <= 2 else f"{len(panels)} of {len(names)} panels")
+    return name + "".join(f"<br>{x}" for x in extra)
+
+
+def _main_table(pairs: Mapping, rows: Sequence[Pooled], tiers: Sequence, per_node: bool, names: Mapping,
+                short: Mapping) -> list[str]:
+    by_pair: dict[tuple, dict] = {}
+    for r in rows:
+        by_pair.setdefault((r.group, r.a, r.b), {})[r.tier] = r
+    lines = _header("first − second", tiers, per_node)
+    for key, cells in pairs.items():
+        name = pair_name(key[1], key[2], short)
+        lines.append(f"| {_row_label(name, cells, names)} | "
+                     + " | ".join(_cell(by_pair[key].get(t)) for t in tiers) + " |")
+    return lines
+
+
+def _detail_table(pairs: Mapping, tiers: Sequence, per_node: bool, names: Mapping, short: Mapping) -> list[str]:
+    lines = _header("first − second, per panel", tiers, per_node)
+    for key, cells in pairs.items():
+        lines.append(f"| **{pair_name(key[1], key[2], short)}** |" + " |" * len(tiers))
+        for panel in dict.fromkeys(c.panel for c in cells):
+            mine = {c.budget_tier(per_node): c for c in cells if c.panel == panel}
+            lines.append(f"| {names[panel]} | " + " | ".join(_cell(mine.get(t)) for t in tiers) + " |")
+    return lines
+
+
+#: Markers read by :mod:`compare.report.html`: a table shown open however long, and one folded under a summary.
+OPEN_TABLE = "<!-- table: open -->"
+FOLDED_TABLE = "<!-- table: folded: {summary} -->"
 
 
 def complete_plant_panels(records) -> set:
@@ -566,22 +630,24 @@ def repaired_instances(records, comparisons: Sequence[Comparison]) -> int:
     return len(changed)
 
 
-def findings_markdown(comparisons: Sequence[Comparison], *, excluded_total: int | None = None,
-                      records=None) -> list[str]:
-    """The "## Findings" section: one bullet per compared pair, the forest plot, and how the claims are tested.
+def comparison_short_names(comparisons: Sequence[Comparison]) -> dict[str, str]:
+    """Arm label -> the name a table row gives it: without trailing training settings where unambiguous."""
+    labels = {x for c in comparisons for x in (c.a, c.b)}
+    out = short_names(labels - {BOUND_LABEL})
+    if BOUND_LABEL in labels:
+        out[BOUND_LABEL] = BOUND_LABEL
+    return out
 
-    Each bullet leads with a bold verdict on the pair: "A beats B" (a claim:
-    :attr:`Comparison.significant`), "A costs more/less than B on k of n instances"
-    (interval excludes 0, not significant after Holm's correction), "mixed" (the typical
-    instance favours one, the median costs the other; both numbers given), "A and B are
-    equal within 0.1 % of LQR's cost", "no clear difference" (interval contains 0) or
-    counts only, then where it holds, the numbers behind it, and short sentences on the
-    cells it leaves out.
+
+def findings_markdown(comparisons: Sequence[Comparison], *, excluded_total: int | None = None,
+                      records=None, forest: Sequence[str] = ("forest.png",)) -> list[str]:
+    """The "## Findings" section: the findings table (pooled over panels), the per-panel detail, the bullets a
+    table cannot replace, the forest plot and how the cells are tested.
 
     Parameters
     ----------
     comparisons : sequence of Comparison
-        As :func:`select_comparisons` gives them (their order is the bullets' order).
+        As :func:`select_comparisons` gives them (their order is the rows' order).
     excluded_total : int, optional
         Unresolved designs dropped from every comparison (``len(unresolved(records))``);
         when not given, the statistics line says only how many pairings they changed.
@@ -591,30 +657,53 @@ def findings_markdown(comparisons: Sequence[Comparison], *, excluded_total: int 
         graph against the bound checks its premise on the instance facts (plant graph
         complete: N(N − 1) links); without them, a plant graph is taken as complete
         where the two cost exactly the same on every instance.
+    forest : sequence of str
+        The forest plot's image files, in order (the caller saves them).
 
     Returns
     -------
     list of str
-        Markdown lines, ending with an empty line; the figure is referenced as
-        ``forest.png`` (the caller saves :func:`plot_forest`'s figure there). Empty
-        where there is nothing to compare.
+        Markdown lines, ending with an empty line; empty where there is nothing to compare.
     """
     if not comparisons:
         return []
     names = panel_names(list(dict.fromkeys(c.panel for c in comparisons)))
-    k = len(comparisons)
+    per_node = budgets_per_node(comparisons)
+    tiers = _tiers(comparisons, per_node)
+    short = comparison_short_names(comparisons)
     pairs: dict[tuple, list] = {}
     for c in comparisons:
         pairs.setdefault((c.group, c.a, c.b), []).append(c)
+    rows = pooled_rows(comparisons)
+    several = len(names) > 1
     if records is not None:
         complete, repaired = complete_plant_panels(records), repaired_instances(records, comparisons)
     else:
         complete, repaired = _identical_panels(comparisons), None
-    # The claims first (the report's first sentence is its first finding), then the figure they come from.
-    # Where no claim can reach significance, the reader learns it before the claims.
-    power = _power_note(comparisons)
+    power = _power_note(comparisons, rows)
     lines = ["## Findings", ""] + ([power, ""] if power else [])
-    lines += [f"- {_pair_bullet(cells, names, k, complete)}" for cells in pairs.values()]
-    lines += ["", "![forest plot](forest.png)", "", _CAPTION]
-    lines += ["", _statistics_line(comparisons, excluded_total, repaired), ""]
+    lines += [OPEN_TABLE, ""] + _main_table(pairs, rows, tiers, per_node, names, short) + [""]
+    lines += [_legend(several), ""]
+    glossary = _glossary({x for c in comparisons for x in (c.a, c.b)})
+    lines += [glossary, ""] if glossary else []
+    if several:
+        lines += [FOLDED_TABLE.format(summary="the same, panel by panel"), ""]
+        lines += _detail_table(pairs, tiers, per_node, names, short) + [""]
+    bullets = []
+    for key, cells in pairs.items():
+        name = pair_name(key[1], key[2], short)
+        mixed_cells = [c for c in cells if evidence_level(c) == _MIXED] if several else []
+        mixed_rows = [r for r in rows if (r.group, r.a, r.b) == key and evidence_level(r) == _MIXED]
+        if several:
+            mixed_rows = [r for r in mixed_rows if len(r.cells) > 1]
+        else:  # one panel: the rows are the cells
+            mixed_cells, mixed_rows = [r.cells[0] for r in mixed_rows], []
+        if mixed_cells or mixed_rows:
+            bullets.append(_mixed_bullet(name, mixed_cells, mixed_rows, names, per_node))
+        note = _note(cells, names, complete)
+        if note:
+            bullets.append(f"**{name}**: {note}")
+    lines += [f"- {b}" for b in bullets] + ([""] if bullets else [])
+    lines += [f"![forest plot]({f})" for f in forest] + ["", _CAPTION, ""]
+    lines += [_statistics_line(comparisons, rows, excluded_total, repaired), ""]
     return lines

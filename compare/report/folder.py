@@ -378,6 +378,57 @@ def _parse_run(cells: dict) -> dict:
     return row
 
 
+def _count_problem(row: dict) -> str | None:
+    """Links or self-loops beyond what the instance's nodes can have: N(N - 1) directed links, N self-loops.
+
+    N is the instance's node count where the folder holds it (``nodes``), else its states
+    (``instance_nodes``, at least as many), else the spec's ``n``; no bound where none is known.
+    """
+    facts, spec = row["facts"], row["instance"]
+    nodes = next((v for v in (facts.get("nodes"), facts.get("n"), spec.get("n"))
+                  if isinstance(v, int) and not isinstance(v, bool) and v >= 0), None)
+    if nodes is None:
+        return None
+    for name, most in (("links", nodes * (nodes - 1)), ("self_loops", nodes)):
+        value = row.get(name)
+        if _is_number(value) and value > most:
+            return f"{name} {value!r} is more than an instance of {nodes} nodes can have (at most {most})"
+    return None
+
+
+def _instance_cell_problem(cells: Mapping, instance: dict) -> str | None:
+    """An ``instance_<field>`` cell that is not the ``instance`` column's value of that field.
+
+    The report reads the instance from the ``instance`` column (its canonical JSON); the
+    ``instance_<field>`` columns repeat its fields for readers of the file, so a hand edit of
+    one (``instance_n = twenty``) would otherwise pass unnoticed while the report showed another
+    value. Numbers compare as numbers; lists and tables are not compared (the JSON holds them).
+    """
+    known = {*_OLD_COLUMNS, *_NEW_COLUMNS, *_LATER_FACTS, *_LATER_RUN_COLUMNS}
+    for column, cell in cells.items():
+        if not column.startswith("instance_") or column in known:
+            continue
+        name = column[len("instance_"):]
+        value = instance.get(name)
+        if value is None:
+            same = cell == ""
+        elif isinstance(value, bool) or isinstance(value, str):
+            same = cell == str(value)
+        elif _is_number(value):
+            try:
+                number = float(cell)
+            except ValueError:
+                same = False
+            else:
+                same = number == value or (number != number and value != value)  # NaN written as nan
+        else:
+            continue
+        if not same:
+            return (f"{column} {cell!r} is not the instance's {name} "
+                    f"({'none' if value is None else repr(value)} in column instance)")
+    return None
+
+
 def _read_runs(path: Path) -> tuple[list[dict], dict[str, dict]]:
     """The rows of runs.csv as the store's dicts, and the instance facts by instance key."""
     rows, facts, seen = [], {}, {}
@@ -386,7 +437,8 @@ def _read_runs(path: Path) -> tuple[list[dict], dict[str, dict]]:
             row = _parse_run(cells)
         except ValueError as exc:  # json.JSONDecodeError included
             raise FolderError(f"{path} line {line}: {_one_line(exc)}") from None
-        problem = row_problem(row)  # the store's check: a hand edit must not change the findings unnoticed
+        problem = (row_problem(row)  # the store's check: a hand edit must not change the findings unnoticed
+                   or _count_problem(row) or _instance_cell_problem(cells, row["instance"]))
         if problem is not None:
             raise FolderError(f"{path} line {line}: {problem}")
         key = (row["run_key"], row["idx"])

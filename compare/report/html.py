@@ -44,6 +44,8 @@ nav.toc li { break-inside: avoid; }
 table { border-collapse: collapse; font-size: 0.9em; }
 th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: left; }
 th { background: #f3f3f3; position: sticky; top: 0; }
+td { font-variant-numeric: tabular-nums; }
+td:first-child { min-width: 9em; }
 tbody tr:nth-child(even) { background: #fafafa; }
 details { margin: 0.5em 0 1.5em; }
 details > summary { cursor: pointer; color: #0b5cad; font-size: 0.93em; }
@@ -129,17 +131,25 @@ def _inline_pngs(body: str, folder: Path) -> str:
 
 
 def _wrap_tables(body: str) -> str:
-    """Every table in a horizontally scrolling box; one longer than :data:`COLLAPSE_ROWS` rows also collapsed."""
+    """Every table in a horizontally scrolling box; one longer than :data:`COLLAPSE_ROWS` rows also collapsed.
+
+    A table the Markdown marks ``<!-- table: open -->`` stays open however long (the findings table); one
+    marked ``<!-- table: folded: SUMMARY -->`` is always folded, under "SUMMARY (N rows)" (its per-panel detail).
+    """
     def wrap(match):
-        table = match.group(0)
+        mode, summary, table = match.group("mode"), match.group("summary"), match.group("table")
         tbody = re.search(r"<tbody>(.*?)</tbody>", table, flags=re.S)
         rows = len(re.findall(r"<tr\b", tbody.group(1) if tbody else table))
         boxed = f'<div class="table-wrap">\n{table}\n</div>'
-        if rows <= COLLAPSE_ROWS:
+        if mode == "folded":
+            return (f"<details>\n<summary>{html.escape(summary or 'table')} ({rows} rows): click to expand</summary>"
+                    f"\n{boxed}\n</details>")
+        if rows <= COLLAPSE_ROWS or mode == "open":
             return boxed
         return f"<details>\n<summary>table ({rows} rows): click to expand</summary>\n{boxed}\n</details>"
 
-    return re.sub(r"<table>.*?</table>", wrap, body, flags=re.S)
+    marker = r"(?:<!-- table: (?P<mode>open|folded)(?:: (?P<summary>[^<>]*?))? -->\s*)?"
+    return re.sub(marker + r"(?P<table><table>.*?</table>)", wrap, body, flags=re.S)
 
 
 def _check_ids(body: str) -> None:

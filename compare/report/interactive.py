@@ -4,8 +4,9 @@ The static PNG/SVG figures (:func:`compare.report.cost_links.plot_cost_vs_links`
 :func:`compare.report.figures.plot_budget_fronts`) stay the reference, and these draw what
 they draw: every design faintly, each method's budget front as a step line in its
 information model's dash, the settings' medians where they lie on or above
-their method's front, so that at least half of the instances reach them (unconnected), the QI boundary, excess costs on a log axis
-clipped as the static axis is clipped. A page adds what paper cannot: hovering a
+their method's front, so that at least half of the instances reach them (unconnected), the QI
+boundary, excess costs on a log axis clipped as the static axis is clipped (one rule:
+:func:`compare.report.figures.cost_range`). A page adds what paper cannot: hovering a
 point names the design (instance, hyperparameters, cost ± standard error), clicking
 a method in the legend hides it in every panel, and two buttons switch the cost
 axes between log and linear (both keep the clip).
@@ -18,16 +19,20 @@ every link count and cost from its plotly JSON alone:
 
 - ``layout.meta`` holds ``{"x_offset": o, "x_per_node": p, ...}``: a trace's ``x``
   is ``links / N + o`` where ``p`` is true (N the panel's ``n``, 1 if it has none;
-  the figures switch to links per node when the panels have several N, as the
-  static ones do), else ``links + o``. ``o`` is :data:`X_OFFSET` (1.0) for links and
+  the figures switch to links per node when the panels are one family at several N,
+  :func:`compare.report.figures.per_node_axis`, as the static ones do), else ``links + o``.
+  ``o`` is :data:`X_OFFSET` (1.0) for links and
   :data:`X_OFFSET_PER_NODE` (0.1) for links per node: the x axes are log axes of
   that sum (plotly has no symlog axis), labelled with the link counts themselves.
   ``layout.meta["panels"]`` lists, per panel, ``panel``, ``title``, its grid ``row``
   and ``col``, its axes (``xaxis``, ``yaxis``: layout keys such as ``"xaxis2"``), and
   ``floor`` and ``top``: the ends of its cost axis (excess costs; the axis' range is
   ``[log10(floor), log10(top)]``, widened by 1e-6 at either end so that a marker on
-  an edge is not lost to rounding). ``layout.meta["grid"]`` is ``{"rows", "cols"}``
-  (rows = N and columns = ‖A‖₂ when both vary, else up to three columns);
+  an edge is not lost to rounding; :func:`compare.report.figures.cost_range` sets both,
+  for the static axis too), ``notes`` and ``margin_top`` (the room above the plot for the
+  off-scale values). ``layout.meta["grid"]`` is ``{"rows", "cols"}``
+  (:func:`compare.report.figures.grid_cells`, the static layout: rows = N and columns =
+  ‖A‖₂ when both vary, else two columns);
   ``layout.meta["legend"]`` the legend's entries, and ``layout.meta["key"]`` what
   the marks mean.
 - Every trace's ``meta`` is ``{"kind": K, "label": LABEL, "panel": [family, n,
@@ -39,12 +44,15 @@ every link count and cost from its plotly JSON alone:
       the label's budget front (:func:`compare.report.statistics.budget_fronts`): the
       median step line (``line.shape == "hv"``), one point per budget, ``None``
       where the median is infinite (half of the instances or more have no design
-      within the budget); the last point repeats the last step at the axis' right
+      within the budget) or above ``OFF_SCALE`` (drawn above the axis as a triangle,
+      never also as a line); the last point repeats the last step at the axis' right
       edge; in the budget-front figure a marker (the only point with a size) marks
       where it starts;
   ``"band"``
       the budget-front figure's 25 % (first) and 75 % (second) quantile traces,
       filled between; a 75 % quantile at infinity is drawn at the axis' ``top``;
+      only where the static figure draws bands (no panel with more than
+      :data:`~compare.report.figures.MAX_BANDS` fronts);
   ``"setting"``
       the median (links, cost) of each setting of the label (one γ, one β)
       where :attr:`compare.report.cost_links.Point.reached` and the median cost is at
@@ -53,8 +61,9 @@ every link count and cost from its plotly JSON alone:
   ``"off-scale"``
       what lies above the cost axis, as triangles on its top edge: the designs
       above it (faint), the reached settings' medians above ``OFF_SCALE`` (with
-      their ``J = …`` written under), and, in the budget-front figure, a front
-      wholly above ``OFF_SCALE`` (at the budget where it starts); ``y`` is the
+      their ``J = …`` written above the plot, where no line runs), and, in the
+      budget-front figure, a front wholly above ``OFF_SCALE`` (at the budget where
+      it starts; the panel's notes name it, as the static title does); ``y`` is the
       axis' ``top``, ``customdata`` the true excess costs, and hovering one gives
       the value;
   ``"boundary"``
@@ -99,8 +108,10 @@ import numpy as np
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
-from .cost_links import aggregate, axis_costs
-from .figures import BOUNDARY_LABEL, OFF_SCALE, FLOOR, excess, panel_heading, shared_y, y_limits
+from .cost_links import aggregate, axis_costs, settings_drawn
+from .figures import (BOUNDARY_LABEL, BUDGET_PAD, COST_PAD, FLOOR, MAX_BANDS, OFF_SCALE, bands_drawn, cost_range,
+                      cost_ticks, excess, grid_cells, links_ticks, panel_heading, panel_order, per_node_axis, shared_y,
+                      title_notes)
 from ..run.records import as_records
 from .statistics import budget_fronts
 from .styles import INFO_MODELS, INFO_ORDER
@@ -115,7 +126,6 @@ X_OFFSET_PER_NODE = 0.1
 #: The kinds of trace (``trace.meta["kind"]``).
 KINDS = ("designs", "front", "band", "setting", "off-scale", "boundary")
 
-_MAX_COLUMNS = 3
 _BOUNDARY_GROUP = "qi-boundary"
 _BOUNDARY_COLOUR = "#595959"  # matplotlib's "0.35", the static figures' boundary grey
 _TOP_TRIANGLE = "triangle-up"
@@ -126,8 +136,8 @@ _RANGE_PAD = 1e-6  # in decades
 
 
 def _panel_order(panels: Iterable[tuple]) -> list[tuple]:
-    """Panels sorted by (family, n, a_norm); a_norm may be None, which plain tuple sorting refuses."""
-    return sorted(set(panels), key=lambda p: (str(p[0]), p[1] or 0, -math.inf if p[2] is None else p[2]))
+    """Panels sorted by (family, n, a_norm), as the static figures order them."""
+    return panel_order(panels)
 
 
 def _label_order(labels: Iterable[str], styles: Mapping) -> list[str]:
@@ -140,15 +150,9 @@ def _label_order(labels: Iterable[str], styles: Mapping) -> list[str]:
 
 
 def _cells(panels: list[tuple]) -> tuple[int, int, dict]:
-    """(rows, cols, panel -> (row, col)): rows = N, columns = ‖A‖₂ when both vary (as the static grid), else
-    up to three columns."""
-    if shared_y(panels):
-        sizes = sorted({p[1] for p in panels})
-        norms = sorted({p[2] for p in panels})
-        return len(sizes), len(norms), {p: (sizes.index(p[1]) + 1, norms.index(p[2]) + 1) for p in panels}
-    cols = min(_MAX_COLUMNS, max(1, len(panels)))
-    rows = -(-max(1, len(panels)) // cols)
-    return rows, cols, {p: (i // cols + 1, i % cols + 1) for i, p in enumerate(panels)}
+    """(rows, cols, panel -> (row, col)), 1-based: :func:`compare.report.figures.grid_cells`, the static layout."""
+    rows, cols, cells = grid_cells(panels)
+    return rows, cols, {p: (r + 1, c + 1) for p, (r, c) in cells.items()}
 
 
 class _Axes:
@@ -159,10 +163,12 @@ class _Axes:
         self.scale = float(panel[1]) if per_node and panel[1] else 1.0
         self.offset = X_OFFSET_PER_NODE if per_node else X_OFFSET
         self.per_node = per_node
+        # cost_range's ends, as the static axis has them (a decade forced here once took the axis to 500 %)
         self.floor = max(float(floor), FLOOR)
-        self.top = max(float(top), self.floor * 10, FLOOR * 10)
+        self.top = max(float(top), self.floor * 1.0001)
         # The links axis ends 15 % right of the largest count, as the static one; the fronts' last step runs there.
         self.right = max(float(right_links), 1.0) / self.scale * 1.15 + self.offset
+        self.label_rows = 0  # rows of off-scale values written above the plot (_stacked_labels)
 
     def x(self, links) -> list[float]:
         return [float(v) / self.scale + self.offset for v in np.atleast_1d(links)]
@@ -178,19 +184,10 @@ class _Axes:
 
 
 def _links_ticks(ax: _Axes) -> tuple[list[float], list[str]]:
-    """Tick positions and texts (link counts, or links per node) of a links axis: 1-2-5 steps, thinned so that
-    neighbours stay apart on a narrow panel."""
+    """Tick positions and texts (link counts, or links per node) of a links axis: the static axis' 1-2-5 steps
+    (:func:`compare.report.figures.links_ticks`), thinned on this axis' own log scale."""
     lo, hi = math.log10(ax.offset), math.log10(ax.right)
-    gap = max(0.17, (hi - lo) / 9)
-    ticks, last, decade = [], -math.inf, 0.1 if ax.per_node else 1.0
-    candidates = [0.0] + [decade * 10 ** k * m for k in range(8) for m in (1, 2, 5)]
-    for t in candidates:
-        pos = math.log10(t + ax.offset)
-        if pos > hi:
-            break
-        if pos - last >= gap:
-            ticks.append(t)
-            last = pos
+    ticks = links_ticks(ax.right - ax.offset, ax.per_node, lambda t: (math.log10(t + ax.offset) - lo) / (hi - lo))
     return [t + ax.offset for t in ticks], [f"{t:g}" for t in ticks]
 
 
@@ -199,18 +196,8 @@ def _percent(value: float) -> str:
 
 
 def _cost_ticks(floor: float, top: float) -> tuple[list[float], list[str]]:
-    """Tick positions and texts (percent) of a log excess-cost axis on [floor, top], as the static axis: decades,
-    with 2 and 5 between where the axis spans at most 3.2 decades (and more where it spans less than one)."""
-    decades = math.log10(top / floor)
-    for subs in ((1,), (1, 2, 5), (1, 2, 3, 5, 7), tuple(range(1, 10))):
-        if len(subs) == 1 and decades <= 3.2:
-            continue
-        ticks = [m * 10.0 ** k for k in range(math.floor(math.log10(floor)) - 1, math.ceil(math.log10(top)) + 1)
-                 for m in subs]
-        ticks = [t for t in ticks if floor * (1 - 1e-9) <= t <= top * (1 + 1e-9)]
-        if len(ticks) >= 3:
-            break
-    return ticks, [_percent(t) for t in ticks]
+    """Tick positions and texts of a log excess-cost axis: :func:`compare.report.figures.cost_ticks`."""
+    return cost_ticks(floor, top)
 
 
 def _new_figure(panels: list[tuple], titles: dict) -> tuple[go.Figure, dict, int, int]:
@@ -249,7 +236,9 @@ def _finish(fig: go.Figure, axes: dict, cells: dict, rows: int, cols: int, per_n
                                  ticks="outside", ticklen=3)
         panels_meta.append({"panel": _panel_json(panel), "title": titles[panel], "row": row, "col": col,
                             "xaxis": xname, "yaxis": yname, "floor": ax.floor, "top": ax.top,
-                            "notes": list((notes or {}).get(panel, []))})
+                            "notes": list((notes or {}).get(panel, [])),
+                            # room above the plot for the off-scale values written there (FIGURE_JS reads it)
+                            "margin_top": _MARGIN_TOP + _ROW_PX * ax.label_rows})
     fig.update_layout(
         title={"text": title} if title else None, template="plotly_white", height=330 * rows + 120,
         width=None, margin={"t": 90 if title else 60, "r": 10},
@@ -333,19 +322,22 @@ def _boundary_trace(ax: _Axes, links: float, shown: set) -> go.Scatter:
 
 
 def _text_position(ax: _Axes, x: float) -> str:
-    """Where a value is written under its triangle: inwards near either edge of the axis."""
+    """Where a value is written above its triangle: inwards near either edge of the axis."""
     lo, hi = math.log10(ax.offset), math.log10(ax.right)
     where = (math.log10(x) - lo) / (hi - lo)
-    return "bottom right" if where < 0.2 else "bottom left" if where > 0.8 else "bottom center"
+    return "top right" if where < 0.2 else "top left" if where > 0.8 else "top center"
 
 
-#: The narrowest panel plot's width, in px, and a digit's width at the labels' 9 px font: for stacking labels.
-_NARROW_PX, _CHAR_PX = 290.0, 5.2
+#: The narrowest panel plot's width, in px, and a digit's width at the labels' 11 px font: for stacking labels.
+_NARROW_PX, _CHAR_PX = 290.0, 6.4
+#: A panel plot's top margin in px (FIGURE_JS's default), and what each row of off-scale values above it adds.
+_MARGIN_TOP, _ROW_PX = 14, 15
 
 
 def _stacked_labels(ax: _Axes, items: list[tuple[float, float]]) -> dict[tuple[float, float], str]:
-    """(x, cost) -> its value as written under its triangle on the top edge, labels that would touch on the
-    narrowest panel moved one line lower (as the static figure does); "J = " before the only one."""
+    """(x, cost) -> its value as written above its triangle on the top edge, outside the plot where no line runs
+    (inside, fronts struck "J = 68.4" through); labels that would touch on the narrowest panel go one line higher
+    (as the static figure does); "J = " before the only one. Sets ``ax.label_rows``."""
     items = sorted(set(items))
     texts = {item: (f"J = {item[1]:.3g}" if len({f"{c:.3g}" for _, c in items}) == 1 else f"{item[1]:.3g}")
              for item in items}
@@ -359,7 +351,8 @@ def _stacked_labels(ax: _Axes, items: list[tuple[float, float]]) -> dict[tuple[f
         left = px if where.endswith("right") else px - width if where.endswith("left") else px - width / 2
         row = next((i for i, end in enumerate(rows) if end + 6 <= left), len(rows))
         rows[row:row + 1] = [left + width]
-        out[item] = "<br>" * row + texts[item]
+        out[item] = texts[item] + "<br>" * row  # empty lines under it lift a "top" text one row each
+    ax.label_rows = max(ax.label_rows, len(rows))
     return out
 
 
@@ -371,7 +364,7 @@ def _off_scale_trace(ax: _Axes, label: str, style, x: list, values: list, hover:
         x=x, y=[ax.top] * len(x), customdata=[float(v) for v in values], cliponaxis=False,
         mode="markers+text" if any(labels) else "markers", text=labels,
         textposition=[_text_position(ax, v) for v in x],
-        textfont={"size": 9, "color": style.colour},
+        textfont={"size": 11, "color": style.colour},
         marker={"color": style.colour, "symbol": _TOP_TRIANGLE, "size": sizes, "opacity": opacity,
                 "line": {"width": 0}},
         hovertext=hover, hovertemplate="%{hovertext}<extra></extra>", meta=_meta("off-scale", label, ax.panel),
@@ -439,6 +432,11 @@ _COST_LINKS_KEY = ("line: each method's budget front, the median over instances 
 _BUDGET_FRONTS_KEY = ("line: median over instances of the best cost within L links, from the budget where more "
                       "than half of the instances have a design (marker) · band: 25–75 % across instances · ▲ on "
                       "the top edge: a front above the axis (hover for the value)")
+#: The key where no bands are drawn (:func:`compare.report.figures.bands_drawn`).
+_BUDGET_FRONTS_KEY_NO_BANDS = ("line: median over instances of the best cost within L links, from the budget where "
+                               "more than half of the instances have a design (marker) · no 25–75 % bands: more "
+                               f"than {MAX_BANDS} methods on a panel · ▲ on the top edge: a front above the axis "
+                               "(hover for the value)")
 #: Added to either key where some panel draws the QI boundary.
 _BOUNDARY_KEY = " · dotted: QI boundary"
 
@@ -478,22 +476,22 @@ def cost_links_figure(records, styles: Mapping, *, boundaries: Mapping | None = 
     points = [p for p in aggregate(records) if p.ok > 0]
     fronts = budget_fronts(records)
     panels = _panel_order(p.panel for p in points)
-    per_node = len({p[1] for p in panels}) > 1
+    per_node = per_node_axis(panels)
     counts = dict(instances) if instances else {p: len(rs.by_instance) for p, rs in records.by_panel.items()}
     titles = {p: panel_heading(p, counts.get(p)) for p in panels}
     order = _label_order(usable.by_label, styles)
     varying = _varying_params(records)
 
-    limits = y_limits(axis_costs(points, fronts)) if shared_y(panels) else None
+    limits = cost_range(axis_costs(points, fronts), COST_PAD) if shared_y(panels) else None
     fig, cells, rows, cols = _new_figure(panels, titles)
     axes, shown_legend = {}, set()
     any_boundary = False
     for panel in panels:
         mine_points = [p for p in points if p.panel == panel]
         mine_fronts = {f.label: f for f in fronts if f.panel == panel}
-        bottom, top = limits or y_limits(axis_costs(mine_points, mine_fronts.values()))
+        bottom, top = limits or cost_range(axis_costs(mine_points, mine_fronts.values()), COST_PAD)
         right = max((r.links for r in usable if r.instance.panel == panel), default=1)
-        ax = axes[panel] = _Axes(panel, per_node, bottom, top * 1.3, right)
+        ax = axes[panel] = _Axes(panel, per_node, bottom, top, right)
         traces = _cost_links_panel(ax, mine_points, mine_fronts, usable.by_panel_label, order, styles, varying,
                                    shown_legend)
         boundary = _boundary_traces(ax, boundaries, any(p.info_model == "delayed" for p in mine_points),
@@ -501,7 +499,8 @@ def cost_links_figure(records, styles: Mapping, *, boundaries: Mapping | None = 
         any_boundary |= bool(boundary)
         _add_traces(fig, traces + boundary, cells[panel])
     return _finish(fig, axes, cells, rows, cols, per_node, y_title="excess cost over LQR (J − 1)",
-                   key=_COST_LINKS_KEY + (_BOUNDARY_KEY if any_boundary else ""),
+                   key=_COST_LINKS_KEY.replace("its method's front", f"its method's front ({settings_drawn(points)})")
+                   + (_BOUNDARY_KEY if any_boundary else ""),
                    legend=_legend_meta(order, styles, any_boundary), titles=titles, title=title)
 
 
@@ -571,8 +570,9 @@ def _front_line_trace(ax: _Axes, label: str, style, group: dict, front) -> go.Sc
     """A budget front's median as a step line to the axis' right edge."""
     x = ax.x(front.budgets) + [ax.right]
     hover = _front_hover(label, front.budgets, front.cost)
+    median = np.append(front.cost[1], front.cost[1][-1])
     return go.Scatter(
-        x=x, y=ax.y(np.append(front.cost[1], front.cost[1][-1])), mode="lines", connectgaps=False,
+        x=x, y=_cut(ax.y(median), median), mode="lines", connectgaps=False,
         line={"color": style.colour, "dash": style.dash, "shape": "hv", "width": 1.8},
         text=hover + hover[-1:], hovertemplate="%{text}<extra></extra>",
         meta=_meta("front", label, ax.panel), **group)
@@ -628,25 +628,27 @@ def budget_fronts_figure(fronts, styles: Mapping, *, boundaries: Mapping | None 
     """
     fronts = [f for f in fronts if np.isfinite(f.cost[1]).any()]
     panels = _panel_order(f.panel for f in fronts)
-    per_node = len({p[1] for p in panels}) > 1
+    per_node = per_node_axis(panels)
     order = _label_order({f.label for f in fronts}, styles)
     titles, notes = _fronts_titles(panels, fronts)
+    bands = bands_drawn(fronts)
 
-    limits = y_limits(_shown_medians(fronts)) if shared_y(panels) else None
+    limits = cost_range(_shown_medians(fronts), BUDGET_PAD) if shared_y(panels) else None
     fig, cells, rows, cols = _new_figure(panels, titles)
     axes, shown_legend = {}, set()
     any_boundary = False
     for panel in panels:
         mine = {f.label: f for f in fronts if f.panel == panel}
-        bottom, top = limits or y_limits(_shown_medians(mine.values()))
-        ax = axes[panel] = _Axes(panel, per_node, bottom, top * 1.25, max(float(f.budgets[-1]) for f in mine.values()))
-        traces = _budget_fronts_panel(ax, mine, order, styles, shown_legend)
+        bottom, top = limits or cost_range(_shown_medians(mine.values()), BUDGET_PAD)
+        ax = axes[panel] = _Axes(panel, per_node, bottom, top, max(float(f.budgets[-1]) for f in mine.values()))
+        traces = _budget_fronts_panel(ax, mine, order, styles, shown_legend, bands)
         boundary = _boundary_traces(ax, boundaries, any(f.info_model == "delayed" for f in mine.values()),
                                     shown_legend)
         any_boundary |= bool(boundary)
         _add_traces(fig, traces + boundary, cells[panel])
     return _finish(fig, axes, cells, rows, cols, per_node, y_title="best excess cost over LQR within ≤ L links",
-                   key=_BUDGET_FRONTS_KEY + (_BOUNDARY_KEY if any_boundary else ""),
+                   key=(_BUDGET_FRONTS_KEY if bands else _BUDGET_FRONTS_KEY_NO_BANDS)
+                   + (_BOUNDARY_KEY if any_boundary else ""),
                    legend=_legend_meta(order, styles, any_boundary), titles=titles, notes=notes,
                    title=title)
 
@@ -658,55 +660,65 @@ def _shown_medians(fronts) -> list[float]:
 
 
 def _fronts_titles(panels: list[tuple], fronts) -> tuple[dict, dict]:
-    """Panel -> its title, and panel -> its notes (the methods with designs on some instances only)."""
+    """Panel -> its title, and panel -> its notes: the static panel's (:func:`compare.report.figures.title_notes`:
+    the fronts above the axis, the methods with designs on some instances only)."""
     titles, notes = {}, {}
     for panel in panels:
         mine = [f for f in fronts if f.panel == panel]
         titles[panel] = panel_heading(panel, max(f.instances for f in mine))
-        partial = [f"{f.label} ({f.covered} of {f.instances})" for f in mine if 0 < f.covered < f.instances]
-        if partial:
-            notes[panel] = ["designs on some instances only: " + ", ".join(partial)]
+        above = [f"{f.label} ({np.min(f.cost[1]):.3g})" for f in mine
+                 if f.start is not None and np.min(f.cost[1]) > OFF_SCALE]
+        lines = [line.replace("\n", " ") for line in title_notes(mine, above)]
+        if lines:
+            notes[panel] = lines
     return titles, notes
 
 
-def _budget_fronts_panel(ax: _Axes, fronts: dict, order: list[str], styles: Mapping, shown: set) -> list:
+def _budget_fronts_panel(ax: _Axes, fronts: dict, order: list[str], styles: Mapping, shown: set,
+                         bands: bool = True) -> list:
     """One panel's traces of :func:`budget_fronts_figure` (``fronts``: label -> the panel's front), in legend
-    order; ``shown`` holds the labels that already have a legend entry."""
-    lowest = {label: float(np.min(f.cost[1])) for label, f in fronts.items()}
-    written = _stacked_labels(ax, [(ax.x(fronts[label].start)[0], c) for label, c in lowest.items() if c > OFF_SCALE])
+    order; ``shown`` holds the labels that already have a legend entry; ``bands``: whether to draw them."""
     traces = []
     for label in order:
         if label in fronts:
             entry = _legend_entry(label, styles, order, shown)
-            traces += _front_traces(ax, label, fronts[label], styles[label], entry, lowest[label], written)
+            traces += _front_traces(ax, label, fronts[label], styles[label], entry, bands)
     return traces
 
 
-def _front_traces(ax: _Axes, label: str, f, style, entry: dict, lowest: float, written: dict) -> list:
-    """A front's traces: its 25–75 % band, its median step line with its start marked, and a triangle on the
-    top edge where the whole front lies above the axis."""
+def _front_traces(ax: _Axes, label: str, f, style, entry: dict, bands: bool = True) -> list:
+    """A front's traces: its 25–75 % band (where ``bands``), its median step line with its start marked, and a
+    triangle on the top edge where the whole front lies above the axis (named in the panel's notes, as the
+    static panel names it under its title)."""
     x = ax.x(f.budgets) + [ax.right]
     hover = _front_hover(label, f.budgets, f.cost)
     hover.append(hover[-1])
     q1, med, q3 = (np.append(row, row[-1]) for row in f.cost)
-    traces = _band_traces(ax, label, style, _group(entry), x, q1, q3)
-    y = ax.y(med)
-    start = next(i for i, v in enumerate(y) if v is not None)
-    if y[start] > ax.top:
-        start = -1  # a start above the axis has no marker there (an off-scale triangle if all is above)
+    traces = _band_traces(ax, label, style, _group(entry), x, q1, q3) if bands else []
+    y = _cut(ax.y(med), med)
+    # The start's marker where the static one is: at the budget it starts, if its median is on the axis.
+    start = int(np.searchsorted(f.budgets, f.start)) if f.start is not None else -1
+    if start >= 0 and y[start] is None:
+        start = -1
     traces.append(go.Scatter(
         x=x, y=y, mode="lines+markers", connectgaps=False, cliponaxis=False,
         line={"color": style.colour, "dash": style.dash, "shape": "hv", "width": 2},
         marker=_marker(style, [(10 if style.plotly_symbol == "star" else 8) if i == start else 0
                                for i in range(len(y))]),
         text=hover, hovertemplate="%{text}<extra></extra>", meta=_meta("front", label, ax.panel), **entry))
-    if lowest > OFF_SCALE:
-        x0 = ax.x(f.start)[0]
+    lowest = float(np.min(f.cost[1]))
+    if lowest > OFF_SCALE and f.start is not None:
         traces.append(_off_scale_trace(
-            ax, label, style, [x0], [lowest - 1.0],
+            ax, label, style, [ax.x(f.start)[0]], [lowest - 1.0],
             [f"<b>{label}</b><br>its whole front is above the axis<br>from ≤ {f.start:g} links: median "
-             f"J = {lowest:.4g} at best"], [11], [1.0], [written[(x0, lowest)]], _group(entry)))
+             f"J = {lowest:.4g} at best"], [11], [1.0], [""], _group(entry)))
     return traces
+
+
+def _cut(y: list, costs) -> list:
+    """Drawn excess costs with None (a gap) where the cost is above OFF_SCALE: what lies above the axis is a
+    triangle on its top edge, never also a line (:func:`compare.report.figures.draw_front_line`)."""
+    return [None if v is None or c > OFF_SCALE else v for v, c in zip(y, np.asarray(costs, dtype=float))]
 
 
 def _band_traces(ax: _Axes, label: str, style, group: dict, x: list, q1, q3) -> list:
@@ -908,6 +920,7 @@ var comparePanels = (function () {
       var traces = data.filter(function (t) { return (t.xaxis || 'x') === xname && (t.yaxis || 'y') === yname; })
         .map(function (t) { return Object.assign({}, t, {xaxis: 'x', yaxis: 'y', showlegend: false}); });
       var own = Object.assign({}, PANEL, {xaxis: axis(layout[p.xaxis]), yaxis: axis(layout[p.yaxis]),
+        margin: Object.assign({}, PANEL.margin, {t: p.margin_top || PANEL.margin.t}),
         meta: {x_offset: meta.x_offset, x_per_node: meta.x_per_node, panel: p.panel, floor: p.floor, top: p.top}});
       var div = document.getElementById(id + '-p' + i);
       Plotly.newPlot(div, traces, own, config);

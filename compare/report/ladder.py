@@ -35,7 +35,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-__all__ = ["Rung", "asked_ladders", "ladder_lines", "ladder_table", "system_names", "verdict_sentence"]
+__all__ = ["Rung", "asked_ladders", "ladder_lines", "ladder_table", "ladder_details", "system_names",
+           "verdict_sentence", "verdict_sentences"]
 
 #: Methods that are no design choice at any budget: the centralized optimum and doing nothing.
 _REFERENCES = ("lqr", "autonomous")
@@ -78,13 +79,23 @@ def _value(v) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
+def _part(key: str, value) -> str:
+    """One key of a system's name: a name bare ("ieee39"), a damping as "d = 2" or "case damping" (the case file's
+    own), N as "N = 10", any other key as "key = value"."""
+    if key in _NAMES and isinstance(value, str):
+        return str(value)
+    if key == "damping":
+        return f"{value} damping" if isinstance(value, str) else f"d = {_value(value)}"
+    return f"{'N' if key == 'n' else key} = {_value(value)}"
+
+
 def system_names(specs: Mapping[str, Mapping]) -> dict[str, str]:
     """System key -> a short name: what tells it apart from the others ("ieee39 (damping = 2)", "wecc").
 
     The spec keys whose values differ between systems, in spec order; the first is always
     named, each later one only where systems that agree on the keys named so far still differ
-    on it. A family, case or file name is given bare ("ieee39"), other keys as "damping = 2", the
-    first part before the others' parentheses.
+    on it. A family, case or file name is given bare ("ieee39"), a damping as "d = 2" or "case
+    damping", other keys as "key = value", the first part before the others' parentheses.
     """
     keys = list(dict.fromkeys(k for spec in specs.values() for k in spec if k not in _NOT_SYSTEM))
     varying = [k for k in keys if len({canonical_key({"v": s.get(k)}) for s in specs.values()}) > 1]
@@ -98,9 +109,7 @@ def system_names(specs: Mapping[str, Mapping]) -> dict[str, str]:
         for i, k in enumerate(varying):
             values = {canonical_key({"v": s.get(k)}) for s in peers}
             if i == 0 or len(values) > 1:
-                v = spec.get(k)
-                parts.append(str(v) if k in _NAMES and isinstance(v, str) else
-                             f"{'N' if k == 'n' else k} = {_value(v)}")
+                parts.append(_part(k, spec.get(k)))
             peers = [s for s in peers if s.get(k) == spec.get(k)]
         out[key] = parts[0] + (f" ({', '.join(parts[1:])})" if len(parts) > 1 else "")
     return out
@@ -158,26 +167,28 @@ def ladder_table(records, ladder: Mapping) -> dict:
     """The numbers behind the ladder's lines.
 
     Returns ``{"systems": [(key, name)], "zero": {key: (cost, label)}, "first": {key: (cost, label)},
-    "rungs": {(key, name): Rung}, "entries": [name]}``: per system the best design with no link
-    of any method but u = 0 and the best within the first budget of any method but LQR and
-    u = 0 (cost inf and label None where none; on a system with several instances, the label
-    whose median over them is lowest), and per (system, method) its :class:`Rung`.
+    "best": {key: [(cost, label), ...]}, "rungs": {(key, name): Rung}, "entries": [name]}``: per
+    system the best design with no link of any method but u = 0, the best within the first budget
+    and within each budget of any method but LQR and u = 0 (cost inf and label None where none; on
+    a system with several instances, the label whose median over them is lowest), and per
+    (system, method) its :class:`Rung`.
     """
     records = as_records(records)
     budgets = [float(b) for b in ladder["budgets"]]
     by_system, specs = _by_system(records)
     names = system_names(specs)
     entries = _entries(records, ladder["methods"])
-    zero, first, rungs = {}, {}, {}
+    zero, first, best, rungs = {}, {}, {}, {}
     for system, instances in by_system.items():
         zero[system] = _best_without_links(instances)
-        first[system] = _best_within_first(instances, budgets[0])
+        best[system] = [_best_within_first(instances, b) for b in budgets]
+        first[system] = best[system][0]
         for name, labels in entries:
             rung = _rung(instances, labels, budgets)
             if rung is not None:
                 rungs[(system, name)] = rung
     order = sorted(by_system, key=lambda s: _order(specs[s]))
-    return {"systems": [(s, names[s]) for s in order], "zero": zero, "first": first, "rungs": rungs,
+    return {"systems": [(s, names[s]) for s in order], "zero": zero, "first": first, "best": best, "rungs": rungs,
             "entries": [name for name, _ in entries]}
 
 
@@ -240,43 +251,45 @@ def _order(spec: Mapping) -> tuple:
 
 
 def _pct(cost: float) -> str:
-    """A cost above LQR's in per cent without the sign of per cent: "+3.6", "+0.41", "+148"; "×12" from 10 × LQR."""
+    """A cost above LQR's in per cent without the sign of per cent: "+3.6", "+0.41", "+148"; "12 × LQR" from 10 × LQR."""
     if cost >= 10:
         return f"{cost:.2g} × LQR" if cost < 100 else f"{cost:,.0f} × LQR"
     pct = 100 * (cost - 1)
     return f"+{pct:.0f}" if pct >= 10 else f"+{pct:.2g}"
 
 
+def _pct_unit(cost: float) -> str:
+    """"+3.6 %", "12 × LQR"."""
+    return _pct(cost) + (" %" if cost < 10 else "")
+
+
 def _pcts(costs: Sequence[float]) -> str:
-    """"+3.6 / +2.7 / +1.9 %", "none / none / +2.1 %" (none: no design within that budget)."""
-    parts = ["none" if not math.isfinite(c) else _pct(c) for c in costs]
-    finite = [c for c in costs if math.isfinite(c)]
-    return " / ".join(parts) + (" %" if finite and all(c < 10 for c in finite) else "")
+    """"+3.6 / +2.7 / +1.9", "none / none / +2.1" (none: no design within that budget); per cent above LQR."""
+    return " / ".join("none" if not math.isfinite(c) else _pct(c) for c in costs)
 
 
 def _plural(k: float, noun: str) -> str:
     return f"{k:g} {noun}{'' if k == 1 else 's'}"
 
 
-
-def _rung_text(name: str, rung: Rung | None, budgets: Sequence[int]) -> str:
+def _rung_text(rung: Rung | None, budgets: Sequence[int]) -> str:
+    """One method's cell of the ladder's table."""
     if rung is None:
-        return f"{name} not run"
+        return "not run"
     if rung.sparsest is None:
         statuses = ", ".join(f"{s} {k}" for s, k in sorted(rung.statuses.items()))
-        return f"{name} no usable design ({statuses})"
+        return f"no usable design ({statuses})"
     if not any(math.isfinite(c) for c in rung.costs):
-        return (f"{name} none within {_plural(budgets[-1], 'link')} (its sparsest design has "
-                f"{_plural(rung.sparsest, 'link')})")
-    text = f"{name} {_pcts(rung.costs)}"
+        return f"none (sparsest: {_plural(rung.sparsest, 'link')})"
+    text = _pcts(rung.costs)
     if not math.isfinite(rung.costs[0]):
-        text += f" (its sparsest design has {_plural(rung.sparsest, 'link')})"
+        text += f" (sparsest: {_plural(rung.sparsest, 'link')})"
     return text
 
 
 def _range(values: Sequence[float]) -> str:
     low, high = min(values), max(values)
-    return f"{_pct(low)} %" if _pct(low) == _pct(high) else f"{_pct(low)} to {_pct(high)} %"
+    return _pct_unit(low) if _pct(low) == _pct(high) else f"{_pct(low)} to {_pct_unit(high)}"
 
 
 def _systems_phrase(k: int, n: int) -> str:
@@ -285,92 +298,147 @@ def _systems_phrase(k: int, n: int) -> str:
     return "no system" if k == 0 else f"{k} of the {n} systems"
 
 
-def verdict_sentence(table: Mapping, ladder: Mapping) -> str:
-    """Whether some design within the first budget, of any method, comes within ``near`` % of LQR, system by
-    system."""
+def _closed(zero: float, best: float) -> float | None:
+    """The share of the gap between the best design with no link and LQR that ``best`` closes; None where unknown."""
+    if not (math.isfinite(zero) and zero > 1 and math.isfinite(best)):
+        return None
+    return max(0.0, (zero - best) / (zero - 1))
+
+
+def _share(values: Sequence[float]) -> str:
+    low, high = 100 * min(values), 100 * max(values)
+    return f"{low:.0f} %" if f"{low:.0f}" == f"{high:.0f}" else f"{low:.0f}–{high:.0f} %"
+
+
+def verdict_sentences(table: Mapping, ladder: Mapping) -> list[str]:
+    """At most three sentences: on how many systems some design within the first budget, of any method, comes
+    within ``near`` % of LQR; where it holds, whether it needs any link; where it fails, by how much, and how much
+    of the gap to LQR the first budget closes."""
     first, near = ladder["budgets"][0], ladder["near"]
     bound = 1 + near / 100
     systems = table["systems"]
     zero = {s: table["zero"][s][0] for s, _ in systems}
     best = {s: table["first"][s][0] for s, _ in systems}  # of every method: a design with no link included
     held = [(s, n) for s, n in systems if best[s] <= bound]
+    missed = [(s, n) for s, n in systems if (s, n) not in held]
     within = f"within {_plural(first, 'link')}"
-    text = _verdict_opening(ladder, within, held, systems)
-    trivial = [(s, n) for s, n in held if zero[s] <= bound]
-    if trivial:
-        text += _trivial_clause(table, trivial, held, systems, near)
-    text += _missed_clauses(table, [(s, n) for s, n in systems if (s, n) not in held], within)
-    text += _gap_clause(systems, zero, best, first)
-    return text + "."
+    out = [_verdict_opening(ladder, within, held, systems)]
+    if held:
+        out.append(_held_sentence(table, held, systems, zero, best, bound, within))
+    closed = [c for c in (_closed(zero[s], best[s]) for s, _ in systems) if c is not None]
+    gap = (f"{_plural(first, 'link')} closes {_share(closed)} of the gap between the best design with no link and "
+           "LQR") if closed else ""
+    if missed:
+        text = _missed_sentence(table, missed, within)
+        out.append(text + (f"; {gap}." if gap and _words(text + gap) <= 38 else "."))
+    elif gap:
+        out.append(gap[0].upper() + gap[1:] + ".")
+    return out
+
+
+def _words(text: str) -> int:
+    return sum(1 for w in text.split() if any(ch.isalnum() for ch in w))
+
+
+def verdict_sentence(table: Mapping, ladder: Mapping) -> str:
+    """The verdict sentences as one line (kept for callers that want the whole verdict)."""
+    return " ".join(verdict_sentences(table, ladder))
 
 
 def _verdict_opening(ladder: Mapping, within: str, held: list, systems: list) -> str:
-    """The spec's claim (or the test itself), and on how many systems it holds: which, where not on all."""
+    """The spec's claim (or the test itself), and on how many systems it holds."""
     near = ladder["near"]
-    test = (f"some design {within} (links counted between nodes) costing at most {near:g} % more than LQR")
     claim = ladder.get("claim", "").strip().rstrip(".")
     count = _systems_phrase(len(held), len(systems))
-    text = (f"{claim[0].upper() + claim[1:]}, taken here as {test}, holds on {count}" if claim
-            else f"Some design {within} (links counted between nodes) costs at most {near:g} % more than LQR on "
-                 f"{count}")
-    if held and len(held) < len(systems):
-        text += f" ({join_words([n for _, n in held])})"
-    return text
+    if claim:
+        return (f"{claim[0].upper() + claim[1:]}, read as some design {within} costing at most {near:g} % more "
+                f"than LQR, holds on {count}.")
+    return f"Some design {within} costs at most {near:g} % more than LQR on {count}."
 
 
-def _trivial_clause(table: Mapping, trivial: list, held: list, systems: list, near: float) -> str:
-    """Where the claim holds without any link: the best design with no link is already within ``near`` %."""
-    label = {table["zero"][s][1] for s, _ in trivial}
-    who = label.pop() if len(label) == 1 else "the best design with no link"
-    where = ("" if len(systems) == 1 else f" on each{'' if len(held) == len(systems) else ' of them'}"
-             if len(trivial) == len(held) else f" on {join_words([n for _, n in trivial])}")
-    return (f"{', trivially' if len(trivial) == len(held) else ''}: with no link at all {who} is already within "
-            f"{near:g} % of LQR{where} ({_range([table['zero'][s][0] for s, _ in trivial])})")
+def _held_sentence(table: Mapping, held: list, systems: list, zero: Mapping, best: Mapping, bound: float,
+                   within: str) -> str:
+    """Where the claim holds: already without any link (the best design with no link named), or within the budget."""
+    trivial = [(s, n) for s, n in held if zero[s] <= bound]
+    other = [(s, n) for s, n in held if (s, n) not in trivial]
+    one = len(systems) == 1
+
+    def on(group) -> str:
+        return "" if one else f" on {join_words([n for _, n in group])}"
+
+    parts = []
+    if trivial:
+        labels = {table["zero"][s][1] for s, _ in trivial}
+        who = labels.pop() if len(labels) == 1 else "the best design with no link"
+        parts.append(f"{'it holds without any link: ' if not other else 'without any link, '}{who} is already "
+                     f"{_range([zero[s] for s, _ in trivial])} above LQR{on(trivial)}")
+    if other:
+        parts.append(f"{within} the best design costs {_range([best[s] for s, _ in other])} above LQR{on(other)}")
+    text = "; ".join(parts)
+    return text[0].upper() + text[1:] + "."
 
 
-def _missed_clauses(table: Mapping, missed: list, within: str) -> str:
-    """Where the claim fails: the best cost within the first budget, or that there is no usable design."""
+def _missed_sentence(table: Mapping, missed: list, within: str) -> str:
+    """Where the claim fails: the best cost within the first budget and with no link, or that there is none."""
     best = {s: table["first"][s][0] for s, _ in missed}
-    text = ""
-    costs = [f"{n} {_pct(best[s])}{' %' if best[s] < 10 else ''} ({table['first'][s][1]})" for s, n in missed
-             if math.isfinite(best[s])]
-    if costs:
-        text += f"; the best design {within} costs, above LQR: {join_words(costs)}"
+    zero = {s: table["zero"][s][0] for s, _ in missed}
+    costly = [(s, n) for s, n in missed if math.isfinite(best[s])]
     nothing = [n for s, n in missed if not math.isfinite(best[s])]
+    parts = []
+    if costly:
+        names = join_words([n for _, n in costly])
+        costs = join_words([f"{_pct_unit(best[s])} above LQR ({table['first'][s][1]})" for s, _ in costly])
+        text = f"On {names} it fails: {within} the best design costs {costs}"
+        zeros = [zero[s] for s, _ in costly if math.isfinite(zero[s])]
+        if zeros:
+            text += f", against {_range(zeros)} with no link"
+        parts.append(text)
     if nothing:
-        text += f"; {join_words(nothing)} {'has' if len(nothing) == 1 else 'have'} no usable design {within}"
-    return text
+        parts.append(f"{'on ' if parts else 'On '}{join_words(nothing)} no usable design lies {within}")
+    return "; ".join(parts)
 
 
-def _gap_clause(systems: list, zero: Mapping, best: Mapping, first) -> str:
-    """How much of the gap between no link and LQR the first budget closes, over the systems: "" where unknown."""
-    closed = [(zero[s] - best[s]) / (zero[s] - 1) for s, _ in systems
-              if math.isfinite(zero[s]) and zero[s] > 1 and math.isfinite(best[s])]
-    if not closed:
-        return ""
-    low, high = 100 * max(0.0, min(closed)), 100 * max(closed)
-    share = f"{low:.0f} %" if f"{low:.0f}" == f"{high:.0f}" else f"{low:.0f}–{high:.0f} %"
-    return f"; {_plural(first, 'link')} closes {share} of the gap between the best design with no link and LQR"
+def ladder_details(table: Mapping, ladder: Mapping) -> list[str]:
+    """The ladder's table: one column per system; the best design with no link, the best of any method within each
+    budget, the share of the gap to LQR the first budget closes, then each method's best within each budget."""
+    budgets = ladder["budgets"]
+    systems = table["systems"]
+    zero_labels = {table["zero"][s][1] for s, _ in systems}
+    one_label = len(zero_labels) == 1 and None not in zero_labels
+
+    def zero_cell(s) -> str:
+        cost, label = table["zero"][s]
+        if label is None:
+            return "none"
+        return _pct(cost) + ("" if one_label else f" ({label})")
+
+    best = table.get("best") or {s: [table["first"][s]] for s, _ in systems}
+    head = f"{' / '.join(str(b) for b in budgets)}"
+    rows = [(f"with no link{': ' + zero_labels.copy().pop() if one_label else ''}", [zero_cell(s) for s, _ in systems]),
+            ("best of any method", [_pcts([c for c, _ in best[s]]) for s, _ in systems])]
+    closed = [_closed(table["zero"][s][0], table["first"][s][0]) for s, _ in systems]
+    if any(c is not None for c in closed):
+        rows.append((f"gap to LQR closed within {_plural(budgets[0], 'link')}",
+                     ["—" if c is None else f"{100 * c:.0f} %" for c in closed]))
+    rows += [(name, [_rung_text(table["rungs"].get((s, name)), budgets) for s, _ in systems])
+             for name in table["entries"]]
+    lines = [f"Best cost within {head} links (directed links between nodes), in per cent above LQR: the median over "
+             "seeds where a system has several; none: no design within the budget (sparsest: its fewest links).", "",
+             "| method | " + " | ".join(n for _, n in systems) + " |", "|---|" + "---|" * len(systems)]
+    lines += [f"| {label} | " + " | ".join(cells) + " |" for label, cells in rows]
+    return lines
 
 
 def ladder_lines(records, meta=None, members=None) -> tuple[list[str], list[str]]:
     """The ladder of every experiment that asks for one: (verdict sentences, detail lines).
 
-    The detail lines are a Markdown list, one item per system: the best design with no
-    link, then each method's best cost within every budget in per cent above LQR.
+    The detail lines are the ladder's table (:func:`ladder_details`).
     """
     sentences, details = [], []
     for _, ladder, rs in asked_ladders(records, meta, members):
         table = ladder_table(rs, ladder)
         if not table["systems"] or not table["entries"]:
             continue
-        sentences.append(verdict_sentence(table, ladder))
-        budgets = ladder["budgets"]
-        head = f"within {' / '.join(str(b) for b in budgets)} links, above LQR"
-        for system, name in table["systems"]:
-            cost, label = table["zero"][system]
-            zero = (f"with no link, {label} {_pct(cost)}{' %' if cost < 10 else ''}" if label
-                    else "no design with no link")
-            rungs = [_rung_text(e, table["rungs"].get((system, e)), budgets) for e in table["entries"]]
-            details.append(f"- {name}: {zero}; {head}: {'; '.join(rungs)}.")
+        sentences += verdict_sentences(table, ladder)
+        details += ([""] if details else []) + ladder_details(table, ladder)
     return sentences, details

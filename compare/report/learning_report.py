@@ -414,8 +414,15 @@ def _curve_axes(ax, panels: int):
     import matplotlib.pyplot as plt
 
     if ax is None:
-        fig, axes = plt.subplots(1, max(1, panels), figsize=(6 * max(1, panels), 4.2), squeeze=False)
-        return fig, list(axes[0])
+        # Two panels to a row at most, 4.3 in each: two of 6 in (1,284 px) showed the legend's 8-point type 8.6 px
+        # tall on an 800 px page.
+        cols = min(2, max(1, panels))
+        rows = -(-max(1, panels) // cols)
+        fig, grid = plt.subplots(rows, cols, figsize=(4.3 * cols, 3.6 * rows), squeeze=False)
+        flat = list(grid.ravel())
+        for extra in flat[max(1, panels):]:
+            extra.set_axis_off()
+        return fig, flat[:max(1, panels)]
     axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
     if len(axes) not in (1, panels) and panels:
         raise ValueError(f"need one axis per ‖A‖₂ ({panels}) or a single axis, got {len(axes)}")

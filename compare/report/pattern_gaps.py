@@ -22,6 +22,8 @@ __all__ = ["pattern_gap_section", "pattern_gaps", "YARDSTICK"]
 
 #: The method whose designs are the yardstick.
 YARDSTICK = "best_pattern"
+#: At most this many budgets in one table (wider ones are split, so that each fits 800 px).
+COLUMNS = 5
 
 
 def pattern_gaps(records) -> dict:
@@ -85,18 +87,29 @@ def pattern_gap_section(records) -> list[str]:
     for (panel, info), (budgets, medians, counts, starts, per_budget) in sorted(gaps.items()):
         if not medians:
             continue
-        heads = [f"≤ {int(b)}" for b in budgets]
-        lines += [f"### {panel_title(panel)}, {info} information", "",
-                  "| method | instances | " + " | ".join(heads) + " |",
-                  "|---|---:|" + "---:|" * len(budgets)]
+        heads = [f"≤ {int(b)} link{'' if b == 1 else 's'}" for b in budgets]
+        lines += [f"### {panel_title(panel)}, {info} information", ""]
         fewer = False
+        rows = []
         for label, values in medians.items():
             if not counts[label]:
                 continue  # no usable design on any instance (SLS on an infeasible graph)
             row = counts[label]
             cells = [_cell(v, k, row) for v, k in zip(values, per_budget[label])]
             fewer |= any(c.endswith(")") for c in cells)
-            lines.append(f"| {label} | {row} | " + " | ".join(cells) + " |")
+            rows.append((label, row, cells))
+        # At most COLUMNS budgets a table, so that it fits 800 px: 13 budgets are three tables of 5, 4 and 4.
+        parts = -(-len(budgets) // COLUMNS)
+        size = -(-len(budgets) // parts)
+        for start in range(0, len(budgets), size):
+            part = slice(start, start + size)
+            first = start == 0
+            lines += ["| method | " + ("instances | " if first else "") + " | ".join(heads[part]) + " |",
+                      "|---|" + ("---:|" if first else "") + "---:|" * len(heads[part])]
+            lines += [f"| {label} | " + (f"{row} | " if first else "") + " | ".join(cells[part]) + " |"
+                      for label, row, cells in rows]
+            lines.append("")
+        lines.pop()
         reached, tried = starts
         note = (f"Starts per pattern: {tried}; the best value of every budget was reached by start "
                 f"{max(reached)} (median {int(np.median(reached))})" if reached else f"Starts per pattern: {tried}")

@@ -52,8 +52,7 @@ def delayed_section(records, save, styles: dict, boundaries: dict) -> list[str]:
                "step: with communication as fast as the plant the information is partially nested, so that SLS "
                "optimum is the best cost any controller, linear or not, reaches with this information on its "
                "instance (`tests/test_lower_bound.py` checks that none of the delayed designs beats it)."
-               if bounds else " Add SLS on the complete graph (`method = \"sls\"`, `graph = \"complete\"`) to "
-               "draw the bound no delayed controller can beat."), ""]
+               if bounds else ""), ""]
 
 
 def experiments_with(section: str, records: Records, meta: StoreMeta, members: dict) -> tuple[list[str], Records]:

@@ -11,6 +11,14 @@ palettes of Okabe & Ito and of Paul Tol:
 - delayed (one step per hop, the GRNN's model): reds, oranges and purples;
 - no communication: greens and greys.
 
+A GRNN's other arms, its readout (shared or per node) and its start (random, or warm
+from another method's design), each have a hue pair of their own (:data:`GRNN_KIND_COLOURS`),
+dark for tanh and light for the linear (identity) activation, and the start's marker; so
+that the eight arms a report such as learned-class compares never share a colour (they
+once shared GRNN-Sparse's orange, and their bands fused). Those hues come from Paul Tol's
+vibrant and ColorBrewer's PuOr and BrBG schemes; ``tests/test_arm_styles.py`` checks that
+every two of them stay apart in simulated deuteranopia and protanopia.
+
 A plug-in method gets a stable colour and marker derived from its name (a hash,
 not the order in which methods happen to appear), from colours no built-in uses.
 """
@@ -22,7 +30,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 __all__ = ["Style", "INFO_MODELS", "INFO_ORDER", "METHOD_STYLES", "style_key", "style_for", "label_styles",
-           "grnn_kinds", "kind_suffix", "REFERENCE_COLOUR", "BOUND_COLOUR"]
+           "grnn_kinds", "kind_suffix", "REFERENCE_COLOUR", "BOUND_COLOUR", "GRNN_KIND_COLOURS"]
 
 #: Information model -> (matplotlib line style, plotly dash, description). The line style of
 #: every curve drawn for a method is its information model's.
@@ -47,6 +55,8 @@ class Style:
     colour: str
     marker: str
     info_model: str = "instantaneous"
+    #: Drawn hollow whatever the (colour, marker) pair; :data:`HOLLOW` lists the built-in ones.
+    hollow: bool = False
 
     @property
     def linestyle(self) -> str:
@@ -64,7 +74,7 @@ class Style:
     @property
     def face(self) -> str:
         """Marker face colour: "none" (see-through) for the variants drawn hollow (:data:`HOLLOW`), else the colour."""
-        return "none" if (self.colour, self.marker) in _HOLLOW_PAIRS else self.colour
+        return "none" if self.hollow or (self.colour, self.marker) in _HOLLOW_PAIRS else self.colour
 
     @property
     def edge(self) -> str:
@@ -112,6 +122,15 @@ METHOD_STYLES: dict[str, tuple[str, str, str]] = {
     "grnn_linear": ("#882255", "v", "delayed"),
     "grnn_dense": ("#AA4499", "v", "delayed"),
     "grnn_fixed": ("#EE6677", "<", "delayed"),
+    # a GRNN-Sparse's readout and start (:data:`GRNN_KIND_COLOURS`): dark tanh, light (hollow) linear
+    "grnn_sparse_per_node": ("#222255", "p", "delayed"),
+    "grnn_sparse_linear_per_node": ("#33BBEE", "p", "delayed"),
+    "grnn_sparse_per_node_warm_delayed": ("#542788", "D", "delayed"),
+    "grnn_sparse_linear_per_node_warm_delayed": ("#998EC3", "D", "delayed"),
+    "grnn_sparse_per_node_warm_diagonal": ("#8C510A", "h", "delayed"),
+    "grnn_sparse_linear_per_node_warm_diagonal": ("#BFA25F", "h", "delayed"),
+    "grnn_sparse_per_node_init_auto": ("#01665E", "H", "delayed"),
+    "grnn_sparse_linear_per_node_init_auto": ("#5AB4AC", "H", "delayed"),
     "sls_complete": ("#661100", "X", "delayed"),
     "sls_plant": ("#AA3377", "p", "delayed"),
     "sls_plant^2": ("#AA3377", "h", "delayed"),
@@ -128,7 +147,9 @@ METHOD_STYLES: dict[str, tuple[str, str, str]] = {
 
 #: Variants drawn with hollow markers, so that a filled marker they coincide with shows through
 #: (the linear GRNN-Sparse path lies on the tanh one within a percent; the prox-Newton path on ADMM's).
-HOLLOW = ("grnn_sparse_linear", "grnn_linear", "sls_plant^2", "sls_plant^3", "sparse_newton")
+HOLLOW = ("grnn_sparse_linear", "grnn_linear", "sls_plant^2", "sls_plant^3", "sparse_newton",
+          "grnn_sparse_linear_per_node", "grnn_sparse_linear_per_node_warm_delayed",
+          "grnn_sparse_linear_per_node_warm_diagonal", "grnn_sparse_linear_per_node_init_auto")
 _HOLLOW_PAIRS = {METHOD_STYLES[k][:2] for k in HOLLOW}
 
 # Colours no built-in method uses, for plug-ins (Tol's muted and light schemes).
@@ -144,12 +165,22 @@ _PLOTLY_SYMBOLS = {"o": "circle", "s": "square", "D": "diamond", "d": "diamond-t
 
 #: A GRNN's readout and initialization make other kinds of design too: (key suffix, label words, marker).
 #: The marker of a warm start is that of the method whose design it starts from (decentralized's hexagon,
-#: sparse_delayed's diamond); the colour stays the GRNN variant's.
+#: sparse_delayed's diamond); the colour is the kind's (:data:`GRNN_KIND_COLOURS`).
 GRNN_KINDS = {
     "per_node": ("_per_node", "per-node", "p"),
     "warm_diagonal": ("_warm_diagonal", "warm: diagonal", "h"),
     "warm_delayed": ("_warm_delayed", "warm: delayed", "D"),
     "warm_auto": ("_init_auto", "init: auto", "H"),
+}
+
+
+#: A GRNN kind's (its last: the start where warm, else the readout) colours: (tanh, linear). Each kind its
+#: own hue, so that an arm is told apart by its colour where its marker is small or hidden (a band, a line).
+GRNN_KIND_COLOURS = {
+    "per_node": ("#222255", "#33BBEE"),
+    "warm_delayed": ("#542788", "#998EC3"),
+    "warm_diagonal": ("#8C510A", "#BFA25F"),
+    "warm_auto": ("#01665E", "#5AB4AC"),
 }
 
 
@@ -205,11 +236,11 @@ def style_for(method: str, params: Mapping | None = None, info_model: str | None
         colour, marker, info = METHOD_STYLES[key]
         return Style(colour, marker, info_model or info)
     kinds = grnn_kinds(method, params)
-    base = key[:key.index(GRNN_KINDS[kinds[0]][0])] if kinds and kinds[0] in GRNN_KINDS else None
-    if base in METHOD_STYLES:  # a GRNN's readout or warm start: the variant's colour, the kind's marker
-        colour, _, info = METHOD_STYLES[base]
-        return Style(colour, GRNN_KINDS[kinds[-1]][2] if kinds[-1] in GRNN_KINDS else _spare(key)[1],
-                     info_model or info)
+    if kinds and kinds[-1] in GRNN_KIND_COLOURS:
+        # another GRNN's readout or warm start: the kind's colour (light and hollow where linear), its marker
+        linear = (params or {}).get("activation") == "identity"
+        return Style(GRNN_KIND_COLOURS[kinds[-1]][linear], GRNN_KINDS[kinds[-1]][2], info_model or "delayed",
+                     hollow=linear)
     colour, marker = _spare(key)
     return Style(colour, marker, info_model or "instantaneous")
 
@@ -231,7 +262,7 @@ def label_styles(records: Iterable) -> dict[str, Style]:
         if (style.colour, style.marker) in used:
             taken = {s.marker for s in out.values() if s.colour == style.colour}
             free = [m for m in _SPARE_MARKERS if m not in taken]
-            style = Style(style.colour, free[0] if free else style.marker, style.info_model)
+            style = Style(style.colour, free[0] if free else style.marker, style.info_model, style.hollow)
         used[(style.colour, style.marker)] = r.label
         out[r.label] = style
     return out

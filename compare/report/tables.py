@@ -99,21 +99,22 @@ def summary_tables(points: list[Point], records: Records | None = None) -> list[
         lines += [
             f"### {panel_title(panel)}",
             "",
-            "| method | information | params | designs | ok | links: median [IQR] | self-loops | cost: median [IQR] |",
-            "|---|---|---|---:|---:|---|---:|---|",
+            "| method | setting | usable | links | self-loops | cost |",
+            "|---|---|---:|---|---:|---|",
         ]
         for p in sorted(pts, key=lambda p: (p.label, p.links[1] if np.isfinite(p.links[1]) else -1,
                                             p.cost[1] if np.isfinite(p.cost[1]) else np.inf, p.params_key)):
             k = flagged.get((p.panel, p.label, p.params_key), 0)
             lines.append(
-                f"| {p.label} | {p.info_model} | {_params_text(p.params)} | {p.designs} | {p.ok} | "
+                f"| {p.label}<br>{p.info_model} | {_params_text(p.params)} | {p.ok} of {p.designs} | "
                 f"{_fmt_iqr(p.links, 3, links=True)} | {_fmt(p.self_loops, 3, links=True)} | {_fmt_iqr(p.cost)}"
                 + (f" ⚠ {k} unresolved" if k else "") + " |"
             )
-        lines += ["", "Medians and interquartile ranges over the setting's usable designs (optimal or inaccurate, "
-                  "finite cost). " + DASH_NOTE + (" ⚠ k unresolved: k of the costs are simulated estimates whose "
-                                                 "relative standard error stays above 1 %; see How this report "
-                                                 "was computed." if flagged else ""), ""]
+        lines += ["", "One row per setting (the method's parameters; its information model under its name): its "
+                  "usable designs (optimal or inaccurate, finite cost) of all it returned, and over those the "
+                  "median [interquartile range] of links and cost, and the median self-loops. " + DASH_NOTE
+                  + (" ⚠ k unresolved: k of the costs are simulated estimates whose relative standard error stays "
+                     "above 1 %; see How this report was computed." if flagged else ""), ""]
     return lines
 
 
@@ -131,17 +132,19 @@ def systems_table(records: Records) -> list[str]:
         instances = [i for i in rs.instances if i.radius is not None]
         if not instances:
             continue
-        per_node = spread([i.n / i.node_count for i in instances if i.n and i.node_count], lambda v: f"{v:g}")
+        states = spread([i.n for i in instances if i.n], str)
         rows.append(f"| {panel_title(panel)} | {len(instances)} | {spread([i.node_count for i in instances], str)} | "
-                    f"{per_node} | {spread([i.actuated for i in instances], str)} | "
+                    f"{states} | {spread([i.actuated for i in instances], str)} | "
                     f"{spread([i.plant_links for i in instances], str)} | {spread([i.comm_links for i in instances], str)} "
                     f"| {spread([i.radius for i in instances], lambda v: f'{v:.4g}')} |")
     if not rows:
         return []
-    return ["| system | instances | nodes | states per node | actuated nodes | plant-graph links | given-graph links | "
-            "open-loop spectral radius |", "|---|---:|---:|---:|---:|---:|---:|---:|", *rows, "",
-            "Links are directed and off-diagonal, between nodes; where instances differ, the median and the range "
-            "[lowest, highest]. A node without an actuator keeps its states and its links.", ""]
+    return ["| system | instances | nodes | states | actuated | plant links | given links | radius |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|", *rows, "",
+            "Actuated: nodes with an input; plant and given links: directed off-diagonal links between nodes of the "
+            "plant graph and of the given communication graph; radius: the open-loop spectral radius. Where "
+            "instances differ, the median and the range [lowest, highest]. A node without an actuator keeps its "
+            "states and its links.", ""]
 
 
 def budget_tables(records: Records) -> list[str]:
@@ -166,25 +169,46 @@ def budget_tables(records: Records) -> list[str]:
     return lines
 
 
+def _paired_cell(r) -> str:
+    """"+0.0127 [+0.0102, +0.0147]<br>10/10": the median difference and its interval (its coverage where too few
+    instances allow 95 %), then the instances whose difference has the median's sign, of those compared; ○ where the
+    interval holds 0."""
+    from .findings_text import agreeing_count, estimate_text
+
+    if not r.instances:
+        return ""
+    mark = " ○" if r.inconclusive and not r.too_few else ""
+    estimate = estimate_text(r, coverage=True).replace(" [", "<br>[", 1)
+    return f"{estimate}<br>{agreeing_count(_Wrap(r))}/{r.instances}{mark}"
+
+
+class _Wrap:
+    """A :class:`Paired` where the findings' helpers expect a cell (``.paired``)."""
+
+    def __init__(self, paired):
+        self.paired = paired
+
+
 def _paired_table(comparisons: dict, title: str, info: Mapping) -> list[str]:
+    """Per panel: one row per second method, one column per budget (fits 800 px where one row per budget did not)."""
     lines = []
     for panel, rows in comparisons.items():
         rows = [r for r in rows if r.instances]
         if not rows:
             continue
-        lines += [f"### {title}, {panel_title(panel)}", "",
-                  "| first − second | information | budget | instances | first better | second better | median Δ |"
-                  " 95 % interval | note |", "|---|---|---|---:|---:|---:|---:|---|---|"]
+        budgets = list(dict.fromkeys(r.budget for r in rows))
+        budgets = sorted(budgets, key=lambda b: np.inf if b is None else b)
+        by_second: dict[str, dict] = {}
         for r in rows:
-            budget = "any" if r.budget is None else f"≤ {r.budget:g}"
-            models = info.get(r.a, "?") if info.get(r.a) == info.get(r.b) else \
-                f"{info.get(r.a, '?')} vs {info.get(r.b, '?')} (crosses models)"
-            if r.too_few:
-                interval, note = "—", "too few instances for a 95 % interval: counts only"
-            else:
-                interval, note = r.interval_text, "interval contains 0" if r.inconclusive else ""
-            lines.append(f"| {r.a} − {r.b} | {models} | {budget} | {r.instances} | {r.a_wins} | {r.b_wins} | "
-                         f"{r.median:+.4f} | {interval} | {note} |")
+            by_second.setdefault(r.b, {})[r.budget] = r
+        lines += [f"### {title}, {panel_title(panel)}", "",
+                  "| second | " + " | ".join("any" if b is None else f"≤ {b:g} links" for b in budgets) + " |",
+                  "|---|" + "---|" * len(budgets)]
+        for second, cells in by_second.items():
+            first = next(iter(cells.values())).a
+            models = "" if info.get(first) == info.get(second) else f"<br>{info.get(second, '?')} information"
+            lines.append(f"| {second}{models} | " + " | ".join(_paired_cell(cells[b]) if b in cells else ""
+                                                              for b in budgets) + " |")
         lines.append("")
     return lines
 
@@ -221,12 +245,12 @@ def paired_lines(records: Records, meta: StoreMeta) -> list[str]:
     if not lines:
         return []
     return ["## Paired comparisons", "",
-            "Every method runs on the same instances, so methods are compared instance by instance: within each "
-            "link budget, the difference of the two methods' best costs on every instance where both have a "
-            "design that fits (negative: the first is better), how many instances each wins, the median "
-            "difference, and a distribution-free 95 % interval for it (order statistics, binomial ranks; the "
-            "achieved coverage is given where fewer instances allow no 95 % interval). Where the interval "
-            "contains 0, the instances do not say which method is better.", ""] + lines
+            "Every method runs on the same instances, so methods are compared instance by instance. Each cell: "
+            "within the column's link budget, the median over instances of the first method's best cost minus the "
+            "second's (negative: the first costs less) with a distribution-free 95 % interval (its coverage in "
+            "parentheses where too few instances allow 95 %), and k/n: the instances, of n, whose difference has "
+            "the median's sign; ○: the interval holds 0, so the instances do not say which is better. These are "
+            "per-panel statistics without Holm's correction; the Findings are the claims.", ""] + lines
 
 
 def precision_text(records: Records) -> str:

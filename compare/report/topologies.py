@@ -28,6 +28,8 @@ __all__ = ["plot_topology_path", "topology_path_records", "topology_caption", "S
 
 #: Networks with more nodes than this are drawn as adjacency (spy) plots.
 SPY_ABOVE = 40
+#: Graphs side by side at most; the type of every label (compare.report.figures.MIN_POINTS).
+TOPOLOGY_COLUMNS, _POINTS = 4, 8
 #: Spy plot colours: a designed link, a plant-graph link the design does not use, and a self-loop.
 _LINK, _PLANT_ONLY, _SELF = "#1A1A1A", "#DDDDDD", "#8C8C8C"
 
@@ -81,7 +83,7 @@ def _draw(ax, adj, pos, colors, title):
                            connectionstyle="arc3,rad=0.08")
     nodes = nx.draw_networkx_nodes(graph, pos, ax=ax, node_size=60, node_color=colors, cmap="Reds",
                                    vmin=0, vmax=max(colors.max(), 1e-12), edgecolors="0.3", linewidths=0.5)
-    ax.set_title(title, fontsize=8)
+    ax.set_title(title, fontsize=_POINTS)
     ax.set_axis_off()
     return nodes
 
@@ -122,7 +124,7 @@ def _spy(ax, adj, order, colors, title, *, plant=None):
     ax.set_yticks([])
     for side in ax.spines.values():
         side.set_linewidth(0.5)
-    ax.set_title(title, fontsize=8)
+    ax.set_title(title, fontsize=_POINTS)
     return strip
 
 
@@ -159,9 +161,16 @@ def plot_topology_path(instance, path, *, axes=None, symbol: str = "β"):
     n = drawing.nodes
     spy = n > SPY_ABOVE
     if axes is None:
-        width = 2.6 if spy else 2.3
-        fig, axes = plt.subplots(1, len(path) + 1, figsize=(width * (len(path) + 1), width + 0.5), squeeze=False)
-        axes = axes[0]
+        # Rows of at most TOPOLOGY_COLUMNS panels: seven graphs in a row made a 2,122 px figure, its titles 4 px
+        # tall on an 800 px page.
+        width = 2.1 if spy else 1.95
+        cols = min(len(path) + 1, TOPOLOGY_COLUMNS)
+        rows = -(-(len(path) + 1) // cols)
+        fig, grid = plt.subplots(rows, cols, figsize=(width * cols + 0.6, (width + 0.55) * rows), squeeze=False)
+        flat = list(grid.ravel())
+        for extra in flat[len(path) + 1:]:
+            extra.set_axis_off()
+        axes = flat[:len(path) + 1]
     else:
         fig = axes[0].figure
     colors = drawing.colours
@@ -172,9 +181,11 @@ def plot_topology_path(instance, path, *, axes=None, symbol: str = "β"):
         mappable = _spy(axes[0], drawing.plant_adj, order, colors, plant_title)
         for ax, (_, _, _, support), title in zip(axes[1:], path, titles):
             _spy(ax, support, order, colors, title, plant=drawing.plant_adj)
-        axes[0].set_ylabel("receiving node", fontsize=7)
+        axes[0].set_ylabel("receiving node", fontsize=_POINTS)
         for ax in axes:
-            ax.set_xlabel("sending node", fontsize=7)
+            ax.set_xlabel("sending node", fontsize=_POINTS)
+            if ax.get_subplotspec() is not None and ax.get_subplotspec().is_first_col():
+                ax.set_ylabel("receiving node", fontsize=_POINTS)
     else:
         pos = nx.kamada_kawai_layout(nx.from_numpy_array(drawing.comm_adj.astype(int)))
         if _collinear(pos):  # a chain: straight edges along one line would all hide behind each other
@@ -184,8 +195,8 @@ def plot_topology_path(instance, path, *, axes=None, symbol: str = "β"):
             _draw(ax, np.asarray(support), pos, colors, title)
     fig.tight_layout()
     bar = fig.colorbar(mappable, ax=list(axes), fraction=0.015, pad=0.01)
-    bar.set_label("|leading eigenvector of A| at each node", fontsize=7)
-    bar.ax.tick_params(labelsize=6)
+    bar.set_label("|leading eigenvector of A| at each node", fontsize=_POINTS)
+    bar.ax.tick_params(labelsize=_POINTS)
     return fig, axes
 
 

@@ -26,7 +26,7 @@ from codesign.status import OPTIMAL  # noqa: E402
 
 from .answer import answer_lines  # noqa: E402
 from .cost_links import Point, aggregate, pareto_front, plot_cost_vs_links, quartiles  # noqa: E402
-from .figures import LINESTYLES, OFF_SCALE, drawn_styles, plot_budget_fronts  # noqa: E402
+from .figures import LINESTYLES, MAX_BANDS, OFF_SCALE, bands_drawn, drawn_styles, plot_budget_fronts  # noqa: E402
 from ..run.meta import StoreMeta  # noqa: E402
 from .pattern_gaps import pattern_gap_section  # noqa: E402
 from ..run.records import Records, as_records  # noqa: E402
@@ -211,10 +211,11 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
         Name -> path of every file written.
     """
     from .decomposition import decomposition_section
+    from .graph_gaps import graph_gap_section
     from .findings import select_comparisons, unresolved
     from .findings_text import findings_markdown
     from .folder import write_folder
-    from .forest import plot_forest
+    from .forest import forest_figures, splice_forest
     from .html import render_html, write_plotly_js
     from .interactive import budget_fronts_figure, cost_links_figure, figure_div
 
@@ -231,9 +232,14 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     save = _save(out, files, drawn)
 
     comparisons = select_comparisons(records, pairs=asked_pairs(records, meta))
+    forest_stems = []  # the forest in parts of at most 20 rows (forest.png, forest-2.png, ...)
     if comparisons:
-        fig, _ = plot_forest(comparisons, styles)
-        save(fig, "forest")
+        for stem, fig in forest_figures(comparisons, styles):
+            save(fig, stem)
+            forest_stems.append(stem)
+    for stale in out.glob("forest-*.*"):  # parts of an earlier, longer forest
+        if stale.suffix in (".png", ".svg") and stale.stem not in forest_stems:
+            stale.unlink()
     fronts = budget_fronts(records)
     if fronts:
         fig, _ = plot_budget_fronts(fronts, styles=styles, boundaries=boundaries)
@@ -246,7 +252,9 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
     lines = [f"# {title}", ""]
     lines += answer_lines(records, comparisons, meta=meta, members=members)
     if comparisons:
-        lines += findings_markdown(comparisons, excluded_total=len(unresolved(records)), records=records)
+        lines += splice_forest(findings_markdown(comparisons, excluded_total=len(unresolved(records)),
+                                                 records=records), forest_stems, comparisons)
+    lines += graph_gap_section(records, save)
     lines += decomposition_section(records, save)
     lines += [
         "## What was compared", "",
@@ -262,12 +270,16 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
         lines += [
             "## Best cost within a link budget", "", "![budget fronts](budget_fronts.png)", "",
             "For a budget of L links, each method's best cost on an instance is the lowest cost among its designs "
-            "there with at most L directed off-diagonal links. The curve is the median of that over the instances "
+            "there with at most L directed off-diagonal links. The curve, the method's *budget front*, is the median "
+            "of that over the instances "
             "the method ran on, an instance without a design within the budget counting as worse than any, so it "
             "starts (at its marker) where more than half of them have one, and every point of it is reached on at "
-            "least half of them; these are the per-instance quantities the findings compare. The band is the "
-            "25–75 % range across those instances (their spread, not the uncertainty of the median). "
-            "Line styles give the information model; designs closer to LQR than the axis reaches (LQR itself "
+            "least half of them; these are the per-instance quantities the findings compare. "
+            + ("The band is the 25–75 % range across those instances (their spread, not the uncertainty of the "
+               "median). " if bands_drawn(fronts) else
+               f"The 25–75 % bands across instances are left out: a panel has more than {MAX_BANDS} methods, "
+               "and their bands would cover each other. ")
+            + "Line styles give the information model; designs closer to LQR than the axis reaches (LQR itself "
             "among them) sit on its bottom edge.", "",
         ]
         lines += budget_tables(records)
@@ -279,8 +291,9 @@ def write_report(records, out, *, specs: dict | None = None, title: str = "Compa
         "Each faint dot is one instance's design, and each line a method's budget front, as above, in its "
         "information model's line style ("
         + "; ".join(f"{v['linestyle']} {v['description']}" for v in INFO_STYLE.values())
-        + "). Each marker is one method setting (one γ or β) as the paper's Fig. 3 draws it: the median link "
-        "count of its designs (the lower median, a count some design has) against their median cost. The two "
+        + "). Each marker is one *setting* of a method, one value of its path's weight (γ or β), as the paper's "
+        "Fig. 3 draws it: the median link count of its designs (the lower median, a count some design has) against "
+        "their median cost. The two "
         "medians are taken separately, not per instance, so a marker is drawn only where it lies on or above its "
         "method's front at its link count: then at least half of the instances reach it (some design of the "
         "method there has no more links and no more cost), and no marker stands below the front it summarizes"

@@ -17,6 +17,7 @@ import sys
 import time
 import warnings
 from contextlib import contextmanager
+from dataclasses import replace
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -24,6 +25,7 @@ import numpy as np
 
 from codesign import Design, count_links
 from codesign.design import Timer
+from codesign.graphs import design_graph, graph_hash
 from codesign.scoring import evaluate
 from codesign.status import FAILED
 
@@ -98,10 +100,23 @@ class RunResult(NamedTuple):
     baseline_mb: float | None = None
 
 
+def _with_graph(instance, design: Design) -> Design:
+    """The design with ``extras["graph"]``, its graph's hash, where its graph can be recovered.
+
+    A report joins a design to the refits of its graph (:mod:`compare.report.graph_gaps`) by
+    this hash; a refit names the graph it was given already.
+    """
+    if "graph" in design.extras:
+        return design
+    adj = design_graph(instance, design)
+    return design if adj is None else replace(design, extras={**design.extras, "graph": graph_hash(adj)})
+
+
 def _evaluated(instance, designs, evaluation, watch: Timer) -> list[Design]:
     """The designs scored as the harness scores them; the time the scoring takes goes on ``watch``."""
     with watch:
-        return [evaluate(instance, d, validation_size=evaluation.validation_size, noise_std=evaluation.noise_std)
+        return [_with_graph(instance, evaluate(instance, d, validation_size=evaluation.validation_size,
+                                               noise_std=evaluation.noise_std))
                 for d in designs]
 
 

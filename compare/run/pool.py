@@ -35,6 +35,10 @@ from multiprocessing.connection import wait as wait_ready
 __all__ = ["WorkerPool", "death_message", "timeout_failure"]
 
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h
+#: The longest one wait for the workers lasts, in seconds; the loop then checks the time limits again.
+#: A limit of 1e10 s would otherwise reach the operating system's wait, which cannot hold it
+#: (OverflowError "timestamp too large to convert to C _PyTime_t" past about 9.2e9 s).
+_LONGEST_WAIT = 3600.0
 
 
 def _die_with_parent(parent_pid: int) -> None:
@@ -254,7 +258,7 @@ class WorkerPool:
         deadlines = [w.task[3] for w in self._busy if w.task[3] is not None]
         if not deadlines:
             return None
-        return max(0.0, min(deadlines) - time.monotonic()) + 0.05
+        return min(_LONGEST_WAIT, max(0.0, min(deadlines) - time.monotonic()) + 0.05)
 
     def _release(self, worker: _Worker) -> None:
         self._busy.remove(worker)

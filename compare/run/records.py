@@ -17,13 +17,18 @@ from functools import cached_property
 from types import MappingProxyType
 from typing import Any
 
+from codesign.design import INFO_MODELS
 from codesign.status import STATUSES, USABLE
 
-__all__ = ["InstanceRecord", "DesignRecord", "Records", "as_records", "canonical_key", "panel_key", "OK_STATUSES",
+__all__ = ["InstanceRecord", "DesignRecord", "Records", "as_records", "canonical_key", "panel_key", "system_name",
+           "OK_STATUSES", "COST_KINDS",
            "row_problem"]
 
 #: Statuses of a design whose cost counts.
 OK_STATUSES = USABLE
+#: How a design's cost was made (:attr:`codesign.Design.cost_kind`): in closed form, simulated on
+#: validation draws, or none (a design without a controller, :meth:`codesign.Design.failure`).
+COST_KINDS = ("exact", "simulated", "none")
 
 
 def _is_number(value) -> bool:
@@ -34,14 +39,21 @@ def row_problem(row: Mapping) -> str | None:
     """What no stored design can hold in ``row`` (the store's columns, decoded), naming the field; None if nothing.
 
     The values a :class:`codesign.Design` refuses or never writes: an unknown status,
-    a usable status (:data:`OK_STATUSES`) without a finite cost > 0, a negative count
-    of links or self-loops, a negative standard error or time. The store's rows and a
+    information model (:data:`codesign.design.INFO_MODELS`) or kind of cost
+    (:data:`COST_KINDS`), a usable status (:data:`OK_STATUSES`) without a finite cost > 0,
+    a negative count of links or self-loops, a negative standard error or time (None, an
+    unknown value, passes; so does an empty information model or kind of cost, as runs.csv
+    writes None). The store's rows and a
     report folder's ``runs.csv`` rows are checked alike, so that neither a damaged store
     nor a hand-edited file changes a report's findings unnoticed.
     """
     status = row.get("status")
     if status not in STATUSES:
         return f"status {status!r} is not a design status ({', '.join(STATUSES)})"
+    for name, known in (("info_model", INFO_MODELS), ("cost_kind", COST_KINDS)):
+        value = row.get(name)
+        if value not in (None, "") and value not in known:  # "": runs.csv's None (report.json's null_text)
+            return f"{name} {value!r} is not one of {', '.join(known)}"
     cost = row.get("cost")
     if status in USABLE and not (_is_number(cost) and math.isfinite(cost) and cost > 0):
         return f"cost {cost!r}: a design with status {status!r} has a finite cost > 0"
@@ -67,11 +79,26 @@ def panel_key(spec: Mapping) -> tuple:
     (None, not NaN, for a family without one. A NaN ``a_norm``, which the spec of a run
     that failed may hold, becomes :data:`PANEL_NAN`: a plain NaN never equals itself, so
     a panel keyed by it could not be looked up, matched or sorted.)
+
+    A published system (a spec with a ``case``: ``power_grid``'s grids) is a panel of its
+    own, named for the family place by :func:`system_name` ("ieee39 (d = 2)"): two
+    dampings of one grid are two systems, and were pooled into one panel of N = 10.
     """
     a_norm = spec.get("a_norm")
     if isinstance(a_norm, float) and math.isnan(a_norm):
         a_norm = PANEL_NAN
-    return (spec.get("family", "?"), spec.get("n", 0), a_norm)
+    family = system_name(spec) if "case" in spec else spec.get("family", "?")
+    return (family, spec.get("n", 0), a_norm)
+
+
+def system_name(spec: Mapping) -> str:
+    """A published system's name: its case and its damping, "ieee39 (d = 2)" or "ieee39 (case damping)"."""
+    damping = spec.get("damping")
+    if damping is None:
+        return str(spec["case"])
+    if damping == "case":
+        return f"{spec['case']} (case damping)"
+    return f"{spec['case']} (d = {float(damping):g})"
 
 
 class _PanelNaN(float):

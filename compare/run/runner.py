@@ -40,10 +40,12 @@ from .execution import (  # noqa: F401 - re-exported: the runner's public names
     reissue_warnings,
     sendable_results,
 )
+from .families import get_family
 from .fingerprint import fingerprint_details
 from .meta import MetaKind, meta_key
 from .pool import WorkerPool
 from .records import canonical_key
+from .refits import has_refits, refit_runs
 from .registry import get_method
 from .spec import ExperimentSpec, Run
 from .store import Store
@@ -152,6 +154,8 @@ class RunSummary:
     by_others: int = 0
     statuses: Counter = field(default_factory=Counter)
     seconds: float = 0.0
+    #: Source designs a refit stage could not refit: no graph recovered (compare.run.refits).
+    graphless: int = 0
 
     def __str__(self) -> str:
         failed = {k: v for k, v in self.statuses.items() if k != OPTIMAL}
@@ -160,6 +164,8 @@ class RunSummary:
             parts[0] += f", {self.by_others} computed by another process"
         if failed:
             parts.append("non-optimal designs: " + ", ".join(f"{v} {k}" for k, v in sorted(failed.items())))
+        if self.graphless:
+            parts.append(f"{self.graphless} source designs with no graph to refit")
         parts.append(f"{self.seconds:.1f} s")
         return "; ".join(parts)
 
@@ -205,6 +211,9 @@ def _drain(pool: Executor, tasks: list[list[Run]], plugins, record) -> None:
 
 #: Instance facts written per transaction while planning: few commits, and an interrupted plan keeps its batches.
 PLAN_BATCH = 1000
+#: Instances above this many states take seconds or more to build (paper family with connect = "bridge":
+#: 36 s at n = 600, 240 s at n = 3000 on 2 cores): planning then shows its bar from the start.
+SLOW_PLAN_STATES = 100
 
 
 def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store, progress: bool = False) -> None:
@@ -232,8 +241,13 @@ def _record_meta(spec: ExperimentSpec, runs: list[Run], store: Store, progress: 
     todo = [spec_dict for key, spec_dict in {canonical_key(run.instance): run.instance for run in runs}.items()
             if "radius" not in known.get(key, {})]
     batch = []
-    with tqdm(todo, desc=f"{spec.name}: planning", unit="instance", disable=not progress, delay=2.0) as bar:
+    # tqdm checks its delay only when an item finishes: one slow build showed nothing at all.
+    slow = any((get_family(s["family"]).states(s) or 0) > SLOW_PLAN_STATES for s in todo)
+    with tqdm(todo, desc=f"{spec.name}: planning", unit="instance", disable=not progress,
+              delay=0.0 if slow else 2.0) as bar:
         for spec_dict in bar:
+            if slow:
+                bar.set_postfix_str(f"building {spec_dict['family']} n = {spec_dict.get('n')}", refresh=True)
             try:
                 batch.append((spec_dict, instance_facts(build_instance(spec_dict))))
             except Exception:  # the instance's runs record the failure; the report draws without its facts
@@ -382,10 +396,28 @@ def run_experiment(
     """
     start = time.perf_counter()
     runs = list({run.key: run for run in spec.runs()}.values())
+    summary = RunSummary(total=0, already_stored=0)
+    try:
+        _run_stage(spec, store, runs, summary, spec.name, executor, workers, progress, wait_for_others, poll)
+        if has_refits(spec):
+            # The second stage: refits of the graphs the first stage's designs chose (compare.run.refits).
+            plan = refit_runs(spec, store, runs)
+            summary.graphless = plan.graphless
+            _run_stage(spec, store, runs + plan.runs, summary, f"{spec.name}: refits", executor, workers, progress,
+                       wait_for_others, poll, new=plan.runs)
+    finally:
+        summary.seconds = time.perf_counter() - start
+    return summary
+
+
+def _run_stage(spec, store, runs, summary, desc, executor, workers, progress, wait_for_others, poll, new=None):
+    """Record ``runs`` as the experiment's members and compute those of ``new`` (all by default) not stored."""
+    new = runs if new is None else new
     _record_meta(spec, runs, store, progress)
-    pending = _pending_runs(runs, store)
-    summary = RunSummary(total=len(runs), already_stored=len(runs) - len(pending))
-    bar = tqdm(total=len(pending), desc=f"{spec.name}", unit="run", disable=not progress or not pending)
+    pending = _pending_runs(new, store)
+    summary.total += len(new)
+    summary.already_stored += len(new) - len(pending)
+    bar = tqdm(total=len(pending), desc=desc, unit="run", disable=not progress or not pending)
     sweep = _Sweep(spec, store, summary, bar, executor, workers)
     if pending:
         _record_environment(spec, store, executor, workers)
@@ -395,5 +427,3 @@ def run_experiment(
         # Released even when interrupted: another process may then take the runs left.
         store.release(sweep.owner)
         bar.close()
-        summary.seconds = time.perf_counter() - start
-    return summary

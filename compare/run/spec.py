@@ -94,6 +94,21 @@ _NAME = re.compile(r"[\w-][\w.-]*")
 #: Instances whose estimate exceeds the machine's memory are refused when a spec is loaded.
 DENSE_MATRICES = 48
 
+#: The size guard's estimate of scoring a simulated design (a learned controller's), in float64
+#: numbers per state of the instance and per validation draw: the draws themselves (validation_size
+#: x n), their copy in the rollout, the rollout's blocks and what the control-variate regression
+#: adds. Measured with tracemalloc while ``codesign.scoring.evaluate`` scored a GRNN design: 6.8-7.8
+#: per state and draw at n = 20 (80,000 and 20,000 draws), 22.9 at n = 100 (where its 1500
+#: quadratic features add 15 per state); 7 is about the least of these, so that what is refused
+#: could not have fit. Specs whose estimate exceeds the machine's memory are refused when loaded.
+VALIDATION_NUMBERS = 7
+
+#: The largest ``timeout`` a spec may give, in seconds (about 116 days). A longer one is refused
+#: when the spec is loaded rather than read as "no limit": a limit no run can reach is a typo or a
+#: unit mix-up (milliseconds), and past about 9.2e9 s the operating system's wait cannot even hold
+#: it (Python's OverflowError "timestamp too large"). Leaving ``timeout`` out means no limit.
+MAX_TIMEOUT = 1e7
+
 #: The most instances an experiment plans unless its spec sets ``max_instances``: planning builds
 #: each instance once in the main process (about 3-4 ms each at small sizes) and stores about 1 KB
 #: of facts for it, so 50,000 take about 3 minutes and 50 MB before the first run.
@@ -132,6 +147,11 @@ class MethodSpec:
     grid: dict = field(default_factory=dict)
     where: dict = field(default_factory=dict)
     timeout: float | None = None
+    #: Entries (method names or labels) whose stored designs' graphs this entry refits, planned after
+    #: they are stored (:mod:`compare.run.refits`); empty for an ordinary entry.
+    sources: tuple = ()
+    #: With ``sources``: per instance, source and budget, only the graph of the source's cheapest design within it.
+    budgets: tuple = ()
 
     def applies_to(self, instance: dict) -> bool:
         return all(instance.get(key) in values for key, values in self.where.items())
@@ -205,14 +225,18 @@ class ExperimentSpec:
     ladder: dict | None = None
 
     def runs(self) -> list[Run]:
-        """Every run of the experiment, instance-major, keyed with its method's code fingerprint."""
+        """Every run of the experiment, instance-major, keyed with its method's code fingerprint.
+
+        Entries with ``sources`` are not among them: their runs depend on stored designs
+        (:func:`compare.run.refits.refit_runs` plans them once those are stored).
+        """
         load_plugins(self.plugins)
         prints = {m.method: fingerprint(get_method(m.method)) for m in self.methods}
         return [
             Run(instance, m.method, m.label, params, self.evaluation, prints[m.method], m.timeout)
             for instance in self.instances.expand()
             for m in self.methods
-            if m.applies_to(instance)
+            if not m.sources and m.applies_to(instance)
             for params in m.expand()
         ]
 
@@ -303,6 +327,7 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
     instances = _parse_instances(typed("instances", data["instances"], (dict, list)), base,
                                  (limit, "max_instances" in data))
     evaluation = _parse_evaluation(typed("evaluation", data.get("evaluation", {}), dict))
+    _check_validation_memory(evaluation, instances)
     raw_methods = typed("methods", data.get("methods", []), list)
     if not raw_methods:
         raise SpecError("methods: the spec needs at least one [[methods]] entry")
@@ -310,6 +335,7 @@ def parse_spec(text: str, *, default_name: str = "experiment", base: str | Path 
     timeout = _parse_timeout("timeout", data.get("timeout"))
     methods = tuple(_parse_method(i, entry, base, loaded, fields, timeout) for i, entry in enumerate(raw_methods))
     _check_where(methods, instances.expand(), name)
+    _check_sources(methods)
     _check_pairs(pairs, methods)
     if ladder is not None:
         _check_pairs((tuple(ladder["methods"]),), methods, where="report.ladder.methods")
@@ -505,6 +531,34 @@ def _check_memory(where: str, family, specs, memory: int | None = None) -> None:
             f"{largest_states * nodes // states}")
 
 
+def _check_validation_memory(evaluation: EvaluationSpec, instances: InstanceSpec, memory: int | None = None) -> None:
+    """Refuse a ``validation_size`` whose draws would not fit this machine's memory (:data:`VALIDATION_NUMBERS`).
+
+    Every simulated cost is scored on ``validation_size`` draws of the instance's states,
+    drawn at once: 10^9 draws of 20 states is a 149 GiB array, which a run would otherwise
+    try to allocate only after its training, and store as a ``MemoryError``.
+    """
+    memory = _machine_memory() if memory is None else memory
+    if not memory:
+        return
+    sizes = [(get_family(spec["family"]).states(spec), spec) for spec in instances.specs]
+    sizes = [(states, spec) for states, spec in sizes if isinstance(states, int) and states > 0]
+    if not sizes:
+        return
+    states, spec = max(sizes, key=lambda item: item[0])
+    draws = evaluation.validation_size
+    need = VALIDATION_NUMBERS * 8 * states * draws
+    if need <= memory:
+        return
+    nodes = spec.get("n", states)
+    shown = f"n = {nodes}" + (f" ({states} states)" if states != nodes else "")
+    raise SpecError(
+        f"evaluation.validation_size: {draws} draws at {shown} need about {_bytes_text(need)} to score a "
+        f"simulated design, more than this machine's {_bytes_text(memory)} of memory (estimate: "
+        f"{VALIDATION_NUMBERS} float64 numbers per state and draw, the draws and their rollout); the largest "
+        f"validation_size that fits is {memory // (VALIDATION_NUMBERS * 8 * states)}")
+
+
 def _parse_evaluation(table: dict) -> EvaluationSpec:
     check_keys("evaluation", table, {"validation_size", "noise_std"})
     size = typed("evaluation.validation_size", table.get("validation_size", EvaluationSpec.validation_size), int)
@@ -517,18 +571,38 @@ def _parse_evaluation(table: dict) -> EvaluationSpec:
 
 
 def _parse_timeout(where: str, value) -> float | None:
-    """A time limit in seconds (a positive finite number), or None for none."""
+    """A time limit in seconds (a positive finite number up to :data:`MAX_TIMEOUT`), or None for none."""
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
         raise SpecError(f"{where}: must be a positive number of seconds, got {value!r}")
+    if value > MAX_TIMEOUT:
+        raise SpecError(f"{where}: {value:g} s is more than the largest time limit, {MAX_TIMEOUT:g} s "
+                        f"({MAX_TIMEOUT / 86400:.0f} days); leave timeout out for no limit")
     return float(value)
+
+
+def _check_together(where: str, method, params: dict, grid: dict) -> None:
+    """Every grid point's hyperparameters checked together (the method's own ``check``), before any run.
+
+    Each value is checked alone above; a method may also refuse values that do not go
+    together (the GRNN's warm start without its per-node readout), which would otherwise
+    be found only when a run starts, and stored as a ``failed`` run that no rerun retries.
+    """
+    if getattr(method, "check", None) is None:
+        return
+    for point in MethodSpec(method.name, method.label, dict(params), dict(grid)).expand():
+        shown = ", ".join(f"{key} = {point[key]!r}" for key in grid)
+        try:
+            method.check_together(point, f"{where}.params" + (f" (grid point {shown})" if grid else ""))
+        except ValueError as exc:
+            raise SpecError(str(exc)) from None
 
 
 def _parse_method(index: int, entry, base, plugins: list, fields=frozenset(), timeout=None) -> MethodSpec:
     where = f"methods[{index}]"
     entry = typed(where, entry, dict)
-    check_keys(where, entry, {"method", "label", "params", "grid", "where", "timeout"})
+    check_keys(where, entry, {"method", "label", "params", "grid", "where", "timeout", "sources", "budgets"})
     timeout = _parse_timeout(f"{where}.timeout", entry["timeout"]) if "timeout" in entry else timeout
     if "method" not in entry:
         raise SpecError(f"{where}.method: missing (which registered method to run)")
@@ -559,6 +633,7 @@ def _parse_method(index: int, entry, base, plugins: list, fields=frozenset(), ti
                 method.check_params({key: value}, f"{where}.grid")
     except ValueError as exc:
         raise SpecError(str(exc)) from None
+    _check_together(where, method, params, grid)
     filters = typed(f"{where}.where", entry.get("where", {}), dict)
     for key, values in filters.items():
         if key not in fields:
@@ -566,4 +641,36 @@ def _parse_method(index: int, entry, base, plugins: list, fields=frozenset(), ti
                             f"{', '.join(sorted(fields))})")
         if not isinstance(values, list) or not values:
             raise SpecError(f"{where}.where.{key}: expected a non-empty list of values, got {values!r}")
-    return MethodSpec(name, label, dict(params), dict(grid), dict(filters), timeout)
+    sources, budgets = _parse_sources(where, entry, method)
+    return MethodSpec(name, label, dict(params), dict(grid), dict(filters), timeout, sources, budgets)
+
+
+def _check_sources(methods: tuple) -> None:
+    """Every ``sources`` item names an ordinary entry (its method or its label)."""
+    known = {name for m in methods if not m.sources for name in (m.method, m.label)}
+    for index, m in enumerate(methods):
+        for source in m.sources:
+            if source not in known:
+                raise SpecError(f"methods[{index}].sources: {source!r} names no entry of this spec (entries: "
+                                f"{', '.join(sorted(known))})")
+
+
+def _parse_sources(where: str, entry: dict, method) -> tuple[tuple, tuple]:
+    """An entry's ``sources`` (non-empty strings) and ``budgets`` (non-negative integers), checked."""
+    if "budgets" in entry and "sources" not in entry:
+        raise SpecError(f"{where}.budgets: applies only with sources (the entries whose graphs are refit)")
+    if "sources" not in entry:
+        return (), ()
+    if "graph" not in method.hyperparameters:
+        raise SpecError(f"{where}.sources: method {method.name!r} takes no graph to refit (use method \"refit\")")
+    if "graph" in entry.get("params", {}) or "graph" in entry.get("grid", {}):
+        raise SpecError(f"{where}.params.graph: set by the harness from each source design's graph; "
+                        "give either sources or a graph")
+    sources = typed(f"{where}.sources", entry["sources"], list)
+    if not sources or not all(isinstance(s, str) and s for s in sources):
+        raise SpecError(f"{where}.sources: expected a non-empty list of method names or labels, got {sources!r}")
+    budgets = typed(f"{where}.budgets", entry.get("budgets", []), list)
+    if not all(b == "any" or (isinstance(b, int) and not isinstance(b, bool) and b >= 0) for b in budgets):
+        raise SpecError(f"{where}.budgets: expected non-negative integers (links) or \"any\", got {budgets!r}")
+    budgets = {None if b == "any" else b for b in budgets}
+    return tuple(sources), tuple(sorted(budgets, key=lambda b: (b is None, b or 0)))

@@ -18,6 +18,7 @@ import functools
 import io
 import json
 import os
+import re
 import socket
 import sqlite3
 import time
@@ -261,14 +262,37 @@ class Store:
         The database file; created (with its folder) if missing or empty.
     create : bool
         False refuses a missing file (readers: ``compare report`` and ``compare export``).
+    read_only : bool
+        Open the file with SQLite's read-only URI (:func:`_read_only_uri`) and change
+        nothing in it: no journal mode, no migration (an older store's missing columns
+        read as unknown), no write; what ``compare report`` and ``compare export`` use,
+        so that a store's bytes are the same after them. A missing file is refused, and
+        the writing methods raise :class:`StoreError`.
     """
 
-    def __init__(self, path, *, create: bool = True):
+    def __init__(self, path, *, create: bool = True, read_only: bool = False):
         self.path = Path(path)
+        self.read_only = read_only
         new = not self.path.exists() or (self.path.is_file() and self.path.stat().st_size == 0)
-        if new and not create:
+        if new and (read_only or not create):
             raise StoreError(f"no result store at {self.path}")
         version = 0 if new else _inspect(self.path)
+        if read_only:
+            # Not the read-write connection below: its journal_mode=DELETE alone rewrites a WAL store's
+            # header (bytes 18-19 and the change counter), and a migration would write the schema.
+            try:
+                self._conn = sqlite3.connect(_read_only_uri(self.path), uri=True, timeout=30)
+                # A store from before the mark may lack the tables a migration would add: empty ones in
+                # this connection's own temporary schema stand in for them (the file is not touched).
+                held = {row[0] for row in self._conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+                for statement in _SCHEMA.split(";"):
+                    table = re.search(r"CREATE TABLE IF NOT EXISTS (\w+)", statement)
+                    if table is not None and table[1] not in held:
+                        self._conn.execute(statement.replace("CREATE TABLE", "CREATE TEMP TABLE", 1))
+                self._conn.execute("PRAGMA query_only = ON")  # no write at all, to those stand-ins either
+            except sqlite3.DatabaseError as exc:
+                raise StoreError(_explain(self.path, exc)) from None
+            return
         if new:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
@@ -510,11 +534,13 @@ class Store:
         could not build, and in stores written before facts were recorded (reports
         then draw without them; nothing is rebuilt).
         """
-        query = """
+        # An older store opened read-only was not migrated: the run columns it lacks read as unknown.
+        held = {row[1] for row in self._conn.execute("PRAGMA table_info(runs)")}
+        later = ", ".join(f"r.{name}" if name in held else f"NULL AS {name}" for name in _LATER_RUN_COLUMNS)
+        query = f"""
             SELECT d.run_key, d.idx, r.experiment, r.instance, d.method, d.label, d.params, d.cost,
                    d.cost_stderr, d.cost_kind, d.links, d.self_loops, d.info_model, d.status, d.message,
-                   d.seconds, d.controller_kind, d.extras, r.version, r.seconds, r.n_designs, r.peak_mb,
-                   r.scoring_seconds, r.baseline_mb
+                   d.seconds, d.controller_kind, d.extras, r.version, r.seconds, r.n_designs, {later}
             FROM designs d JOIN runs r USING (run_key)
             WHERE NOT EXISTS (SELECT 1 FROM members) OR d.run_key IN (SELECT run_key FROM members)
             ORDER BY r.instance, d.label, d.run_key, d.idx

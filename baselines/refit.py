@@ -30,6 +30,7 @@ report takes it over the classes (:mod:`compare.report.graph_gaps`).
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import replace
 from typing import Annotated, Literal
 
@@ -38,7 +39,7 @@ import numpy as np
 from codesign.design import Design, Timer
 from codesign.graphs import GRAPH_PATTERN, graph_hash, graph_links, graph_text, parse_graph
 from codesign.methods import AtLeast, Matches, method
-from codesign.status import FAILED, INFEASIBLE
+from codesign.status import INFEASIBLE
 
 from ._sparse import DecentralizedCache, gain_design, pattern_starts
 from .sls import sls
@@ -335,10 +336,6 @@ def refit(
                         ensemble=ensemble, lr=lr, dtype=dtype)
 
 
-_DEFAULTS = {"activation": "tanh", "steps": 150, "ensemble": 3, "lr": 0.03, "dtype": "float32", "seed": 0}
-
-
-def failed_refit(params: dict, why: str) -> Design:
-    """The recorded status of a refit that has no graph to fit on (a diverged or graph-less source)."""
-    return Design.failure(METHOD, dict(params), FAILED, why,
-                          info_model=INFO_MODELS.get(params.get("controller"), "delayed"))
+#: The registered method's GRNN settings and their defaults, read from its signature (one table of defaults).
+_DEFAULTS = {name: p.default for name, p in inspect.signature(refit).parameters.items()
+             if p.kind is p.KEYWORD_ONLY and name not in ("graph", "controller")}

@@ -26,6 +26,7 @@ from threadpoolctl import threadpool_limits
 
 from codesign import riccati
 from codesign.riccati import NoStabilizingSolutionError, dare_residual, solve_discrete_are
+from test_riccati_random import orthonormal, scaled_to_radius
 
 KINDS = ("plain", "singular_q", "hidden", "ill_r", "ill_r_singular_q", "slow")
 
@@ -34,14 +35,6 @@ KINDS = ("plain", "singular_q", "hidden", "ill_r", "ill_r_singular_q", "slow")
 def one_blas_thread():
     with threadpool_limits(1):  # hundreds of small solves on a shared 2-core machine
         yield
-
-
-def _orthonormal(rng, n):
-    return np.linalg.qr(rng.standard_normal((n, n)))[0]
-
-
-def _scaled(rng, M, low, high):
-    return M * rng.uniform(low, high) / np.max(np.abs(np.linalg.eigvals(M)))
 
 
 def fuzzed_dare(seed):
@@ -57,7 +50,7 @@ def fuzzed_dare(seed):
     kind = KINDS[seed % len(KINDS)]
     n = int(rng.integers(2, 31))
     m = int(rng.integers(1, min(n, 8) + 1))
-    A = _scaled(rng, rng.standard_normal((n, n)), 0.3, 1.6)
+    A = scaled_to_radius(rng, rng.standard_normal((n, n)), 0.3, 1.6)
     B = rng.standard_normal((n, m))
     C = rng.standard_normal((n, n))
     Q = C @ C.T / n + 0.1 * np.eye(n)
@@ -69,20 +62,20 @@ def fuzzed_dare(seed):
     if kind == "hidden":
         hidden = int(rng.integers(1, n))
         seen = n - hidden
-        A11 = _scaled(rng, rng.standard_normal((seen, seen)), 0.2, 1.5)
-        A22 = _scaled(rng, rng.standard_normal((hidden, hidden)), 1.02, 2.0)
+        A11 = scaled_to_radius(rng, rng.standard_normal((seen, seen)), 0.2, 1.5)
+        A22 = scaled_to_radius(rng, rng.standard_normal((hidden, hidden)), 1.02, 2.0)
         A0 = np.block([[A11, np.zeros((seen, hidden))],
                        [rng.standard_normal((hidden, seen)) * rng.uniform(0, 1), A22]])
         r = int(rng.integers(1, seen + 1))
         C0 = np.hstack([rng.standard_normal((r, seen)), np.zeros((r, hidden))])
-        T = _orthonormal(rng, n)
+        T = orthonormal(rng, n)
         A, Q = T @ A0 @ T.T, T @ C0.T @ C0 @ T.T
     if kind.startswith("ill_r"):
-        V = _orthonormal(rng, m)
+        V = orthonormal(rng, m)
         spread = np.logspace(0, -rng.uniform(8, 12), m) if m > 1 else np.array([10.0 ** -rng.uniform(0, 12)])
         R = (V * spread) @ V.T
     if kind == "slow":
-        A = _scaled(rng, rng.standard_normal((n, n)), 0.9, 1.0 + 1e-3)
+        A = scaled_to_radius(rng, rng.standard_normal((n, n)), 0.9, 1.0 + 1e-3)
         B = B * 10.0 ** rng.uniform(-4, 0)
     return kind, A, B, (Q + Q.T) / 2 * 10.0 ** rng.uniform(-2, 2), (R + R.T) / 2
 
@@ -93,12 +86,12 @@ def hidden_mode_dare(seed):
     n, m = int(rng.integers(40, 90)), int(rng.integers(1, 6))
     hidden = int(rng.integers(1, max(2, n // 3)))
     seen = n - hidden
-    A11 = _scaled(rng, rng.standard_normal((seen, seen)), 0.2, 1.3)
-    A22 = _scaled(rng, rng.standard_normal((hidden, hidden)), 1.001, 1.5)
+    A11 = scaled_to_radius(rng, rng.standard_normal((seen, seen)), 0.2, 1.3)
+    A22 = scaled_to_radius(rng, rng.standard_normal((hidden, hidden)), 1.001, 1.5)
     A0 = np.block([[A11, np.zeros((seen, hidden))], [rng.standard_normal((hidden, seen)) * rng.uniform(0, 1), A22]])
     r = int(rng.integers(1, seen + 1))
     C0 = np.hstack([rng.standard_normal((r, seen)), np.zeros((r, hidden))])
-    T = _orthonormal(rng, n)
+    T = orthonormal(rng, n)
     A, Q = T @ A0 @ T.T, T @ C0.T @ C0 @ T.T
     B = rng.standard_normal((n, m)) * 10.0 ** rng.uniform(-2, 1)
     Q = (Q + Q.T) / 2 * 10.0 ** rng.uniform(-3, 3)

@@ -46,11 +46,13 @@ def one_blas_thread():
         yield
 
 
-def _orthonormal(rng, n):
+def orthonormal(rng, n):
+    """A random n x n orthonormal matrix."""
     return np.linalg.qr(rng.standard_normal((n, n)))[0]
 
 
-def _scaled(rng, M, low, high):
+def scaled_to_radius(rng, M, low, high):
+    """M rescaled to a spectral radius drawn uniformly from [low, high]."""
     return M * rng.uniform(low, high) / np.max(np.abs(np.linalg.eigvals(M)))
 
 
@@ -66,18 +68,18 @@ def singular_q_dare(seed):
         D = rng.standard_normal((m, m))
         R = D @ D.T / m + 0.3 * np.eye(m)
     if kind in ("rank", "near"):
-        A = _scaled(rng, rng.standard_normal((n, n)), 0.3, 1.6)
+        A = scaled_to_radius(rng, rng.standard_normal((n, n)), 0.3, 1.6)
         C = rng.standard_normal((int(rng.integers(1, n)), n))
     else:
         hidden = int(rng.integers(1, n))
         seen = n - hidden
-        A11 = _scaled(rng, rng.standard_normal((seen, seen)), 0.2, 1.5)
-        A22 = _scaled(rng, rng.standard_normal((hidden, hidden)), 1.02, 2.0)
+        A11 = scaled_to_radius(rng, rng.standard_normal((seen, seen)), 0.2, 1.5)
+        A22 = scaled_to_radius(rng, rng.standard_normal((hidden, hidden)), 1.02, 2.0)
         A21 = rng.standard_normal((hidden, seen)) * rng.uniform(0, 1)
         A0 = np.block([[A11, np.zeros((seen, hidden))], [A21, A22]])
         r = int(rng.integers(1, seen + 1))
         C0 = np.hstack([rng.standard_normal((r, seen)), np.zeros((r, hidden))])
-        T = _orthonormal(rng, n)
+        T = orthonormal(rng, n)
         A, C = T @ A0 @ T.T, C0 @ T.T
     Q = C.T @ C
     if kind.startswith("near"):
@@ -93,13 +95,13 @@ def no_solution_dare(seed):
     rng = np.random.default_rng(10_000 + seed)
     n, m = int(rng.integers(2, 9)), int(rng.integers(1, 4))
     k = 1 if n == 2 or rng.random() < 0.5 else 2
-    A11 = _scaled(rng, rng.standard_normal((n - k, n - k)), 0.2, 1.5)
+    A11 = scaled_to_radius(rng, rng.standard_normal((n - k, n - k)), 0.2, 1.5)
     if k == 1:
         A22 = np.array([[rng.choice([1.0, -1.0])]])
     else:
         t = rng.uniform(0, np.pi)
         A22 = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
-    T = _orthonormal(rng, n)
+    T = orthonormal(rng, n)
     if seed % 2 == 0:
         A0 = np.block([[A11, np.zeros((n - k, k))], [rng.standard_normal((k, n - k)), A22]])
         r = int(rng.integers(1, n - k + 1))

@@ -48,7 +48,8 @@ from .statistics import Paired, best_within, paired_difference, panel_budgets
 from .styles import grnn_kinds
 
 __all__ = ["ARMS", "Decomposition", "Nonlinearity", "Divergence", "decompose", "nonlinearity", "divergence",
-           "decomposition_sentences", "decomposition_section", "plot_decomposition", "undecomposed"]
+           "decomposition_sentences", "decomposition_section", "plot_decomposition", "undecomposed", "system_of",
+           "system_title"]
 
 #: The arms, in order, and what each is.
 ARMS = {"paper": "shared readout, random start", "per-node": "per-node readout, random start",
@@ -82,7 +83,7 @@ def _is_static_delayed(r) -> bool:
             and not is_sls_bound(r))
 
 
-def _system(r) -> tuple:
+def system_of(r) -> tuple:
     """Panels pooled into one system: a family at one size."""
     return (r.instance.family, r.instance.nodes)
 
@@ -137,7 +138,7 @@ def _usable(records: Records) -> Records:
 def _tables(records: Records):
     """Per system: (instances, budgets, {(arm, activation) or "static" or "bound": best-within table})."""
     out = {}
-    for system, rs in sorted(records.group(_system).items(), key=lambda kv: tuple(map(str, kv[0]))):
+    for system, rs in sorted(records.group(system_of).items(), key=lambda kv: tuple(map(str, kv[0]))):
         instances = sorted(rs.by_instance)
         budgets = tuple(panel_budgets(rs))
         grid = [np.inf if b is None else b for b in budgets]
@@ -211,7 +212,7 @@ def nonlinearity(records) -> list[Nonlinearity]:
 def divergence(records) -> list[Divergence]:
     """Divergence of every arm on every system (all designs, usable or not)."""
     out = []
-    for system, rs in sorted(as_records(records).group(_system).items(), key=lambda kv: tuple(map(str, kv[0]))):
+    for system, rs in sorted(as_records(records).group(system_of).items(), key=lambda kv: tuple(map(str, kv[0]))):
         radii = sorted(i.radius for i in rs.instances if i.radius is not None)
         # The upper median, a radius some instance has: what the systems table gives.
         radius = float(radii[len(radii) // 2]) if radii else None
@@ -257,7 +258,7 @@ _STARTS = {"delayed": "the delayed ℓ1 path's design", "diagonal": "the diagona
 
 def _starts(records: Records, system: tuple) -> str:
     """What the warm starts on ``system`` started from, in words."""
-    inits = sorted({str(r.params.get("init")) for r in records if _arm(r) == "warm" and _system(r) == system})
+    inits = sorted({str(r.params.get("init")) for r in records if _arm(r) == "warm" and system_of(r) == system})
     return " or ".join(_STARTS.get(i, i) for i in inits) or "a static design"
 
 

@@ -191,8 +191,31 @@ def _arms(records: Records, labels: list[str]) -> dict[str, _Arm]:
 # --------------------------------------------------------------------------- comparisons
 
 
+class _Verdict:
+    """The verdict of a paired comparison from its ``tested``, ``equal``, ``too_few``, ``mixed`` and ``paired``:
+    one definition for a panel's :class:`Comparison` and a pooled row (:class:`Pooled`)."""
+
+    @property
+    def significant(self) -> bool:
+        """A claim: tested, not equal within the margin, and drawn in the same order (one "beats" the other)."""
+        return self.tested and not self.equal and not self.mixed
+
+    @property
+    def verdict(self) -> str:
+        """"better" or "worse" (a against b), "equal", "mixed", "no significant difference", or "too few"."""
+        if self.equal:
+            return "equal"
+        if self.too_few:
+            return "too few"
+        if self.mixed:
+            return "mixed"
+        if not self.significant:
+            return "no significant difference"
+        return "better" if self.paired.high < 0 else "worse"
+
+
 @dataclass(frozen=True)
-class Comparison:
+class Comparison(_Verdict):
     """Design ``a`` against design ``b`` on one panel within one link budget.
 
     Parameters
@@ -296,23 +319,6 @@ class Comparison:
             return False
         return (self.drawn_a - self.drawn_b) * self.paired.median < 0
 
-    @property
-    def significant(self) -> bool:
-        """A claim: tested, not equal within the margin, and drawn in the same order (one "beats" the other)."""
-        return self.tested and not self.equal and not self.mixed
-
-    @property
-    def verdict(self) -> str:
-        """"better" or "worse" (a against b), "equal", "mixed", "no significant difference", or "too few"."""
-        if self.equal:
-            return "equal"
-        if self.too_few:
-            return "too few"
-        if self.mixed:
-            return "mixed"
-        if not self.significant:
-            return "no significant difference"
-        return "better" if self.paired.high < 0 else "worse"
 
 
 def sign_test(a_wins: int, b_wins: int) -> float:
@@ -558,7 +564,7 @@ def _compare(a, b, budget, kept, full, k):
 
 
 @dataclass(frozen=True)
-class Pooled:
+class Pooled(_Verdict):
     """One pair within one budget tier, pooled over the panels where it is compared: a row of the findings table.
 
     The instances of every panel are taken together: the median of all their
@@ -630,22 +636,6 @@ class Pooled:
                     and (c.drawn_a - c.drawn_b) * m < 0]
         return [c for c in self.cells if not c.too_few and not c.paired.inconclusive and c.paired.median * m < 0]
 
-    @property
-    def significant(self) -> bool:
-        return self.tested and not self.equal and not self.mixed
-
-    @property
-    def verdict(self) -> str:
-        """As :attr:`Comparison.verdict`."""
-        if self.equal:
-            return "equal"
-        if self.too_few:
-            return "too few"
-        if self.mixed:
-            return "mixed"
-        if not self.significant:
-            return "no significant difference"
-        return "better" if self.paired.high < 0 else "worse"
 
 
 def _pool(cells: Sequence[Comparison], tier) -> Pooled:

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..run.records import OK_STATUSES, as_records
+from .decomposition import system_of, system_title
 from .statistics import median_interval, panel_budgets
 
 __all__ = ["GapRow", "LearnedRow", "graph_values", "graph_gaps", "learned_on_best_graph", "graph_gap_section",
@@ -45,16 +46,6 @@ _DELAYED_STATIC = "delayed_static_gain"
 
 def is_refit(r) -> bool:
     return r.method == "refit"
-
-
-def _system(r) -> tuple:
-    """Panels pooled into one system: a family at one size."""
-    return (r.instance.family, r.instance.nodes)
-
-
-def system_title(system: tuple) -> str:
-    family, n = system
-    return f"{family}, N = {n}" if n is not None else str(family)
 
 
 def _graph(r):
@@ -129,7 +120,7 @@ def _method_designs(records) -> dict:
     for r in as_records(records):
         if is_refit(r) or r.method == "lqr" or not _usable(r) or r.info_model not in MODELS:
             continue
-        out[(_system(r), r.label, r.info_model)][r.instance.key].append(r)
+        out[(system_of(r), r.label, r.info_model)][r.instance.key].append(r)
     return out
 
 
@@ -150,7 +141,7 @@ def graph_gaps(records) -> list[GapRow]:
         return []
     values = graph_values(records)
     refit = _refit_graphs(records)
-    budgets_of = {s: panel_budgets(rs) for s, rs in records.group(_system).items()}
+    budgets_of = {s: panel_budgets(rs) for s, rs in records.group(system_of).items()}
     rows = []
     for (system, label, model), by_instance in sorted(_method_designs(records).items(), key=lambda kv: str(kv[0])):
         for budget in budgets_of[system]:
@@ -209,7 +200,7 @@ def learned_on_best_graph(records) -> list[LearnedRow]:
     records = as_records(records)
     by_graph = _refits_by_graph(records)
     rows = []
-    for system, rs in sorted(records.group(_system).items(), key=lambda kv: str(kv[0])):
+    for system, rs in sorted(records.group(system_of).items(), key=lambda kv: str(kv[0])):
         instances = {r.instance.key for r in rs}
         activations = sorted({arm[1] for (i, _), arms in by_graph.items() if i in instances
                               for arm in arms if isinstance(arm, tuple)})

@@ -511,6 +511,12 @@ def _bytes_text(size: float) -> str:
         size /= 1024
 
 
+def _size_text(spec: dict, states: int) -> str:
+    """"n = 20", or "n = 39 (78 states)" where nodes have several states."""
+    nodes = spec.get("n", states)
+    return f"n = {nodes}" + (f" ({states} states)" if states != nodes else "")
+
+
 def _check_memory(where: str, family, specs, memory: int | None = None) -> None:
     """Refuse instances whose run would not fit this machine's memory (:data:`DENSE_MATRICES` estimate)."""
     memory = _machine_memory() if memory is None else memory
@@ -523,9 +529,8 @@ def _check_memory(where: str, family, specs, memory: int | None = None) -> None:
             continue
         nodes = spec.get("n", states)
         need = DENSE_MATRICES * 8 * states ** 2
-        shown = f"n = {nodes}" + (f" ({states} states)" if states != nodes else "")
         raise SpecError(
-            f"{where}.n: {shown} needs about {_bytes_text(need)} per run, more than this machine's "
+            f"{where}.n: {_size_text(spec, states)} needs about {_bytes_text(need)} per run, more than this machine's "
             f"{_bytes_text(memory)} of memory (estimate: {DENSE_MATRICES} dense {states} x {states} float64 "
             f"matrices, the instance and centralized LQR's Riccati solve); the largest n that fits is "
             f"{largest_states * nodes // states}")
@@ -550,10 +555,8 @@ def _check_validation_memory(evaluation: EvaluationSpec, instances: InstanceSpec
     need = VALIDATION_NUMBERS * 8 * states * draws
     if need <= memory:
         return
-    nodes = spec.get("n", states)
-    shown = f"n = {nodes}" + (f" ({states} states)" if states != nodes else "")
     raise SpecError(
-        f"evaluation.validation_size: {draws} draws at {shown} need about {_bytes_text(need)} to score a "
+        f"evaluation.validation_size: {draws} draws at {_size_text(spec, states)} need about {_bytes_text(need)} to score a "
         f"simulated design, more than this machine's {_bytes_text(memory)} of memory (estimate: "
         f"{VALIDATION_NUMBERS} float64 numbers per state and draw, the draws and their rollout); the largest "
         f"validation_size that fits is {memory // (VALIDATION_NUMBERS * 8 * states)}")

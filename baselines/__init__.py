@@ -8,6 +8,7 @@ Public names::
     from baselines import sparse_budget, best_pattern     # exact link budgets, exhaustive search
     from baselines import refit, refit_design             # the best controller of one class on a given graph
     from baselines import gcnn, gcnn_batch, GCNNController   # the learned baseline, from codesign.learned
+    from baselines import grnn, grnn_batch      # the GRNN trainer with its warm starts' static designs
 """
 
 from codesign.learned.gcnn import GCNNController, gcnn, gcnn_batch
@@ -24,6 +25,7 @@ from .truncation import truncated_lqr
 from .sparse_budget import sparse_budget
 from .best_pattern import best_pattern
 from .refit import refit, refit_design
+from .grnn import grnn, grnn_batch
 
 __all__ = [
     "lqr",
@@ -54,5 +56,7 @@ __all__ = [
     "refit_design",
     "gcnn",
     "gcnn_batch",
+    "grnn",
+    "grnn_batch",
     "GCNNController",
 ]

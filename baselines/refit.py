@@ -21,8 +21,8 @@ controller (docs/methods.md, "Refit on a graph"). The classes, by information mo
   the plant spreads the disturbance faster than the graph carries news of it);
 - ``grnn``: the GRNN with a per-node readout, S held to the graph's support, started
   from the ``delayed`` refit by the exact embedding and kept only where training
-  ends below that start (:func:`codesign.learned.grnn.grnn` with ``variant =
-  "given"``, ``init = "delayed"``); tanh or linear (``activation``).
+  ends below that start (:func:`baselines.grnn` with ``variant = "given"``,
+  ``init = "delayed"``); tanh or linear (``activation``).
 
 The graph's value V(G) is the lowest refit cost on G in one information model; a
 report takes it over the classes (:mod:`compare.report.graph_gaps`).
@@ -42,6 +42,7 @@ from codesign.methods import AtLeast, Matches, method
 from codesign.status import INFEASIBLE
 
 from ._sparse import DecentralizedCache, gain_design, pattern_starts
+from .grnn import grnn_batch
 from .sls import sls
 from .sparse_delayed import DelayedStaticGain, Nodes, delayed_gain_design, stabilizing_delayed
 from .stabilizing import stabilizing_gain
@@ -174,16 +175,8 @@ def _grnn_job(instance, adj, params, starts, settings: dict):
 
 
 def _train_grnns(jobs) -> list:
-    """:func:`codesign.learned.grnn.grnn_batch` on (instance, settings) jobs of the ``given`` variant.
-
-    Reached through the method registry, not imported: ``codesign.learned.warm`` still imports
-    ``baselines`` for the GRNN's own warm starts (the one layering break tests/test_imports.py
-    lists), and an import of the GRNN's module here would close that into a cycle.
-    """
-    from codesign.methods import get_method
-
-    return get_method("grnn").batch([(instance, {k: v for k, v in settings.items() if k != "variant"})
-                                     for instance, settings in jobs])
+    """:func:`baselines.grnn.grnn_batch` on (instance, settings) jobs of the ``given`` variant."""
+    return grnn_batch([(instance, {k: v for k, v in settings.items() if k != "variant"}) for instance, settings in jobs])
 
 
 def _grnn_design(trained: Design, start: Design, params: dict) -> Design:
@@ -218,7 +211,7 @@ def refit_design(instance, graph, controller: str = "delayed", *, starts=(), act
     seed : int
         The GRNN's training seed (``controller = "grnn"`` only).
     **grnn_settings
-        Training settings of :func:`codesign.learned.grnn.grnn` (``steps``, ``lr``, ...).
+        Training settings of :func:`baselines.grnn` (``steps``, ``lr``, ...).
 
     Returns
     -------

@@ -52,7 +52,14 @@ __all__ = ["sparse_admm", "ADMM_GAMMAS", "admm_gamma_max"]
 
 #: Default weights (normalized units): from an (almost) dense LQR gain to a few links
 #: on the paper's family; the path is closed by the diagonal gain at γ = inf.
-ADMM_GAMMAS = tuple(float(g) for g in np.geomspace(1e-6, 0.1, 10))
+#: np.geomspace(1e-6, 0.1, 10) written out: geomspace's last digit depends on the BLAS
+#: build and processor, and these values enter run keys, so two machines would key the
+#: same run differently (tests/test_default_grids.py checks the two agree to rounding).
+ADMM_GAMMAS = (
+    1e-06, 3.5938136638046257e-06, 1.2915496650148827e-05, 4.641588833612782e-05,
+    0.0001668100537200059, 0.0005994842503189409, 0.0021544346900318843,
+    0.007742636826811277, 0.02782559402207126, 0.1,
+)
 
 _ARMIJO = 1e-4        # sufficient-decrease constant of the line search
 _BACKTRACK = 0.5

@@ -119,7 +119,12 @@ SCS_EPS = 1e-5
 
 #: Default weights (normalized units): from an (almost) dense gain to a few links on
 #: the paper's family; the path is closed by the diagonal gain at γ = inf.
-SDP_GAMMAS = tuple(float(g) for g in np.geomspace(1e-4, 1.0, 10))
+#: np.geomspace(1e-4, 1.0, 10) written out, for the reason given at ADMM_GAMMAS.
+SDP_GAMMAS = (
+    0.0001, 0.0002782559402207126, 0.000774263682681127, 0.002154434690031882,
+    0.005994842503189409, 0.016681005372000592, 0.046415888336127774,
+    0.12915496650148828, 0.3593813663804626, 1.0,
+)
 
 #: Clarabel's supernodal factorization (faer) handles the dense 2n x 2n LMI block
 #: about 3x faster than its default QDLDL; one thread, so sweeps can run in parallel.

@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from codesign import paper_instance
-from codesign.learned import grnn_batch
+from baselines import grnn_batch
 from codesign.status import DIVERGED, USABLE
 from compare.run.families.random_network import random_network_instance
 

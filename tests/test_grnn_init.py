@@ -1,6 +1,7 @@
 """Warm starts of the GRNN (issue #50, item 3): ``init = "diagonal" | "delayed"`` with a per-node readout.
 
-The start is a static design embedded exactly (codesign/learned/warm.py); every ensemble member
+The start is a static design embedded exactly (codesign/learned/warm.py), the design computed by
+the method layer (baselines/grnn.py: ``baselines.grnn`` is the trainer with its sources); every ensemble member
 starts at its closed loop; the design is the start wherever training ended above it (the kept-start
 rule); ``init = "random"`` (the default) changes no bit.
 """
@@ -10,12 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from baselines import decentralized, sparse_delayed
-from codesign import exact_cost, grnn, paper_instance
+from baselines import decentralized, grnn, grnn_batch, sparse_delayed
+from baselines.grnn import StartCache
+from codesign import exact_cost, paper_instance
 from codesign.design import count_links
-from codesign.learned import grnn_batch
 from codesign.learned.grnn import GRNNController, GRNNSettings, LinearGRNNController, _first_stage_specs, _parse
-from codesign.learned.warm import StartCache, build_start, delayed_gamma
+from codesign.learned.warm import build_start, delayed_gamma
 from compare.run.families.mass_spring import mass_spring_instance
 
 #: Short training: seconds per run at N = 8.
@@ -165,11 +166,12 @@ def test_the_delayed_start_by_variant(small):
 
 
 def test_a_batch_computes_each_start_once_per_instance(small, monkeypatch):
-    import baselines
+    import sys
 
+    sources = sys.modules["baselines.grnn"]  # where StartCache finds it (the name baselines.grnn is the function)
     calls = []
-    real = baselines.decentralized
-    monkeypatch.setattr(baselines, "decentralized", lambda inst, **kw: calls.append(inst.seed) or real(inst, **kw))
+    real = sources.decentralized
+    monkeypatch.setattr(sources, "decentralized", lambda inst, **kw: calls.append(inst.seed) or real(inst, **kw))
     jobs = [(inst, dict(variant=variant, seed=seed, **WARM, steps=2, ensemble=1, stability_steps=0, curve_size=10,
                         **({"beta": 0.1} if variant == "sparse" else {})))
             for inst in small[:2] for variant in ("given", "sparse") for seed in (0, 1)]
@@ -260,3 +262,20 @@ def test_a_trained_model_that_diverges_when_scored_gives_way_to_its_start(small,
     assert design.extras["trained_cost"] <= design.extras["init_cost"]  # it had won on the selection set
     assert "kept" in design.message and "the trained model diverged when scored (an unbounded draw)" in design.message
     assert design.links == 0  # the diagonal gain's
+
+
+def test_the_trainer_alone_refuses_a_warm_start_it_has_no_design_for(small):
+    """codesign's grnn has no static designs of its own (it imports nothing of baselines): a warm start
+    that needs one is a one-line ValueError naming where it is, before any training; a start the
+    caller gives (``start=``) needs none, and gives what baselines.grnn gives from the same start."""
+    from codesign.learned.grnn import grnn as trainer_grnn
+
+    inst = small[0]
+    with pytest.raises(ValueError, match=r"^init 'diagonal' starts from a design of the method layer.*baselines\.grnn"):
+        trainer_grnn(inst, **WARM, **SHORT)
+    given = sparse_delayed(inst, gammas=[0.0], diagonal_end=False)[0]
+    on_graph = dict(readout="per_node", init="delayed", activation="identity", **SHORT)
+    alone = trainer_grnn(inst, start=given, **on_graph)
+    layered = grnn(inst, start=given, **on_graph)
+    assert alone.extras["init_source"] == layered.extras["init_source"] == "the given delayed design"
+    assert alone.cost == pytest.approx(layered.cost, rel=1e-12)

@@ -14,6 +14,7 @@ import importlib
 import numpy as np
 import pytest
 
+import baselines  # noqa: F401  (registers the GRNN methods)
 from codesign import evaluation
 from codesign.evaluation import exact_cost, local_cost_form, simulate, spectral_radius, validation_set
 from codesign.instances import hop_distances, paper_instance

@@ -4,7 +4,8 @@ Public names::
 
     from codesign.learned import grnn, grnn_batch, GRNNController, GRNNSettings
     from codesign.learned import embed_delayed_gain      # a delayed static gain as a per-node-readout GRNN
-    grnn(instance, readout="per_node", init="diagonal")  # a warm start (codesign.learned.warm)
+    grnn(instance, readout="per_node", init="delayed", start=design)  # a warm start from your delayed design
+    # (init="diagonal" and the variants' own delayed designs: baselines.grnn, which computes them)
     from codesign.learned import gcnn, gcnn_batch, GCNNController, GCNNSettings
     from codesign.learned import TrainingSettings, takes_settings      # your own learned method
     from codesign.learned import AutogradModel, StackModel, Member, Loop, TrainingJob

@@ -20,7 +20,6 @@ table of the training settings and their bounds.
 from __future__ import annotations
 
 import dataclasses
-import functools
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
@@ -30,7 +29,7 @@ from .._lazy import lazy_import
 from ..design import Design, count_links
 from ..evaluation import STRUCTURED_ABOVE, exact_cost, spectral_radius
 from ..instances import hop_distances, node_width
-from ..methods import Above, AtLeast, method
+from ..methods import Above, AtLeast
 from ..status import DIVERGED, OPTIMAL
 from .engines import ENGINES, fused_unsupported, resolve_engine
 from .grnn_bptt import ACTIVATIONS, READOUTS, GRNNStack, ModelSpec, init_fwg
@@ -38,7 +37,7 @@ from .settings import SEED, TrainingSettings, takes_settings
 from .trainer import (Loop, TrainingJob, best_member, curve, diverged_members_message, finish_designs,
                       selection_costs, selection_set, simulated_design, train_jobs)
 from .grnn_controller import GRNNController, LinearGRNNController, slot_index
-from .warm import INITS, Start, StartCache, build_start, check_warm_settings, member_start
+from .warm import INITS, Start, StartSources, build_start, check_warm_settings, member_start
 
 torch = lazy_import("torch")
 
@@ -80,7 +79,7 @@ class GRNNSettings(TrainingSettings):
         The ``sparse`` variant's candidate links: the l1 stage trains S on the pairs
         of nodes within this many hops of the given communication graph (self-loops
         included) instead of on all N^2 pairs (None, the paper's). Needed above
-        :data:`DENSE_L1_MAX_STATES` states, where a dense S makes the l1 stage too slow.
+        :data:`baselines.grnn.DENSE_L1_MAX_STATES` states, where a dense S makes the l1 stage too slow.
     activation : {"tanh", "identity"}
         σ in Z(t+1) = σ(S Z(t) W + x(t) F): the paper's tanh, or the identity (the
         linear GRNN: a linear dynamic controller with the same parameterization,
@@ -108,7 +107,9 @@ class GRNNSettings(TrainingSettings):
         diagonal gain (:func:`baselines.decentralized`), or a delayed gain
         (``sparse``: the delayed l1 path's design at γ = β / trace(P); ``dense``: the
         path's dense end; ``given``: the delayed gain polished on the given graph's
-        links; not ``fixed``); ``auto``: the diagonal gain where the open-loop spectral
+        links; not ``fixed``); these designs are the method layer's, so a warm start
+        runs through :func:`baselines.grnn` (the registered methods do), or takes
+        ``start=``; ``auto``: the diagonal gain where the open-loop spectral
         radius exceeds :data:`~codesign.learned.warm.AUTO_RADIUS` (1.22, measured), else
         the random draw. Needs ``readout="per_node"`` and ``hidden`` >= 2 states per
         node. Every member starts at the design's closed loop, with learning rates
@@ -332,19 +333,18 @@ def _training(job: _Job, specs: list[ModelSpec]) -> TrainingJob:
     return TrainingJob(GRNNStack, [spec.member() for spec in specs], s.loop(job.instance.horizon), options=options)
 
 
-def _warm_starts(parsed: list[_Job]) -> None:
-    """Each warm-started job's :class:`Start`; a source design is computed once per instance (and γ) in the batch."""
+def _warm_starts(parsed: list[_Job], sources: StartSources | None) -> None:
+    """Each warm-started job's :class:`Start`, its source design from ``sources`` (which caches it per instance)."""
     import time
 
-    cache = StartCache()
     for job in parsed:
         if job.settings.init != "random":
             t0 = time.perf_counter()
-            job.start = build_start(cache, job.instance, job.settings, job.variant, job.beta, source=job.source)
+            job.start = build_start(sources, job.instance, job.settings, job.variant, job.beta, source=job.source)
             job.start.extras["init_seconds"] = time.perf_counter() - t0  # 0 where the source was computed already
 
 
-def grnn_batch(jobs, *, stack_size: int = 128) -> list[Design]:
+def grnn_batch(jobs, *, stack_size: int = 128, sources: StartSources | None = None) -> list[Design]:
     """Train many GRNN designs together; one :class:`Design` per job, in order.
 
     Parameters
@@ -357,11 +357,16 @@ def grnn_batch(jobs, *, stack_size: int = 128) -> list[Design]:
         loop settings (steps, batch, horizon, dtype, ...) share stacks of up to
         ``stack_size`` models: ensemble members, variants, instances and the
         sparse variant's l1 stage all train side by side, then all refinements.
+    stack_size : int
+    sources : StartSources, optional
+        Where warm starts' static designs come from (the method layer's:
+        ``baselines.grnn_batch`` passes them). None: a job whose ``init`` needs one
+        and has no ``start`` is a one-line ValueError before any training.
     """
     parsed = [_parse(instance, kwargs) for instance, kwargs in jobs]
     if not parsed:
         return []
-    _warm_starts(parsed)
+    _warm_starts(parsed, sources)
     specs = [_first_stage_specs(job) for job in parsed]
     first, seconds = train_jobs([_training(job, job_specs) for job, job_specs in zip(parsed, specs)],
                                 stack_size=stack_size)
@@ -558,66 +563,3 @@ def grnn(instance, *, variant: str = "given", beta: Annotated[float, AtLeast(0)]
         with one step of delay per hop (``info_model="delayed"``).
     """
     return grnn_batch([(instance, {"variant": variant, "beta": beta, "seed": seed, **settings})])[0]
-
-
-#: Settings of the co-design (l1 stage, threshold, refinement) that only ``sparse`` uses.
-_SPARSE_ONLY = ("beta", "l1_lr", "threshold", "refine_ensemble", "l1_hops")
-
-
-class _VariantBatch:
-    """``grnn_batch`` for one variant: trains a runner's batch of runs in shared stacks."""
-
-    def __init__(self, variant: str):
-        self.variant = variant
-
-    def __call__(self, pairs):
-        return grnn_batch([(inst, {**params, "variant": self.variant}) for inst, params in pairs])
-
-
-#: Variants are refused at once above these many states. Above STRUCTURED_ABOVE states training
-#: multiplies S, A and B on their supports (the fused engine) and so do the rollouts that score
-#: a design, so a time step costs O(N degree h batch): at 1000 states one GRNN design on the
-#: given graph took 270 s with the default settings (one thread, docs/performance.md). A dense S
-#: stays O(N^2): the ``dense`` variant, and the l1 stage of ``sparse`` without ``l1_hops``.
-MAX_STATES = {"given": 1000, "fixed": 1000, "sparse": 1000, "dense": 500}
-#: The most states of GRNN-Sparse's l1 stage on all N^2 pairs (``l1_hops`` None).
-DENSE_L1_MAX_STATES = 500
-_DENSE_S_REASON = ("S is a dense N x N matrix: one design takes 416 s at 500 states with the default settings, "
-                   "about 20 minutes of training at 1000, where an Adam step of one model takes 0.74 s "
-                   "(its products grow like N^2)")
-_MEASURED = "the largest size it has been measured at (docs/performance.md, 'A thousand nodes')"
-_MAX_STATES_REASONS = {"sparse": _MEASURED, "dense": _DENSE_S_REASON, "given": _MEASURED, "fixed": _MEASURED}
-
-
-def _blocks_limit(instance, params: dict):
-    """Nodes with several states or inputs: the torch engine's and the rollouts' dense products."""
-    if not getattr(instance, "scalar_nodes", True):
-        return DENSE_L1_MAX_STATES, "on nodes with several states or inputs its products with S, A and B are dense"
-    return None
-
-
-def _sparse_limit(instance, params: dict):
-    """GRNN-Sparse's tighter size limits: its l1 stage on all N^2 pairs (``l1_hops`` not set), node blocks."""
-    if params.get("l1_hops") is None:
-        return DENSE_L1_MAX_STATES, f"its l1 stage trains all N^2 pairs; {_DENSE_S_REASON}: set l1_hops " \
-                                    f"(e.g. 3) to train on a few hops of the communication graph"
-    return _blocks_limit(instance, params)
-
-
-# One function, four methods: the variant is bound, and the co-design's own settings
-# are hidden from the other variants so that a spec setting them is an error naming the key.
-for _name, _variant, _label, _summary in (
-    ("grnn", "given", "GRNN", "GRNN with S trained on the given communication graph (one step delay per hop)."),
-    ("grnn_dense", "dense", "GRNN-Dense", "GRNN with all N^2 entries of S trained (a centralized, delayed controller)."),
-    ("grnn_fixed", "fixed", "GRNN-Fixed", "GRNN with S frozen at the normalized adjacency; only F, W, G train."),
-    ("grnn_sparse", "sparse", "GRNN-Sparse",
-     "GRNN co-design: l1 stage on a dense S, threshold, refinement on the found support."),
-):
-    method(_name, label=_label, summary=_summary, bind={"variant": _variant},
-           exclude=() if _variant == "sparse" else _SPARSE_ONLY, batch=_VariantBatch(_variant), batch_size=25,
-           node_blocks=True,
-           max_states=MAX_STATES[_variant], max_states_reason=_MAX_STATES_REASONS[_variant],
-           size_limit=_sparse_limit if _variant == "sparse" else _blocks_limit,
-           produces=("training_curve", "topology_path") if _variant == "sparse" else ("training_curve",),
-           path_param="beta" if _variant == "sparse" else None,
-           check=functools.partial(check_settings, variant=_variant))(grnn)

@@ -1,10 +1,13 @@
 """Warm starts of the GRNN (``init`` setting): a static design embedded as the model's first parameters.
 
-``init = "diagonal"`` starts from :func:`baselines.decentralized`'s gain (the best
-diagonal static gain) on the run's instance, ``init = "delayed"`` from a delayed
-static gain (:func:`baselines.sparse_delayed`'s machinery), both embedded exactly
-by :func:`codesign.learned.embed_delayed_gain` into a GRNN with a per-node readout
-(docs/methods.md, "Warm starts"). Which delayed design, by variant:
+``init = "diagonal"`` starts from the best diagonal static gain on the run's instance,
+``init = "delayed"`` from a delayed static gain, both embedded exactly by
+:func:`codesign.learned.embed_delayed_gain` into a GRNN with a per-node readout
+(docs/methods.md, "Warm starts"). The static designs are the method layer's
+(``baselines.decentralized``, ``baselines.sparse_delayed``): they reach the trainer
+through a :class:`StartSources` the caller passes (``baselines.grnn`` passes its
+``StartCache``), so that this package imports nothing of that layer. Which delayed
+design, by variant:
 
 - ``sparse``: the delayed ℓ1 path run on the grid (0, γ) with γ = β / trace(P), the
   run's own ℓ1 weight in the path's units (the GRNN's loss is the raw cost, mean over
@@ -12,8 +15,8 @@ by :func:`codesign.learned.embed_delayed_gain` into a GRNN with a per-node reado
   trace(P) plus γ Σ w_ij |K_d,ij|, and the embedding has S = K_d);
 - ``dense``: the path's dense end (γ = 0, every link free);
 - ``given``: the delayed gain polished on the given graph's links (the path's polish
-  and stabilizing search, :func:`baselines.sparse_delayed.stabilizing_delayed`, from
-  the diagonal gain), the best delayed gain with the GRNN's own links;
+  and stabilizing search, from the diagonal gain), the best delayed gain with the
+  GRNN's own links;
 - ``fixed``: refused (S is frozen at the normalized adjacency, which no delayed gain's
   weights are in general).
 
@@ -36,7 +39,8 @@ With tanh the embedding's ε is ``init_scale`` / σ, σ >= 1 the largest standar
 any state along the design's closed loop from x(0) ~ N(0, I) (:func:`state_std`), so that
 tanh's inputs stay in its near-linear range on plants of any scale; the run's learning rates
 are divided by σ too (Adam moves each parameter by about ``lr`` per step, and F is σ times
-smaller). Sources are computed once per instance (and γ) in a batch (:class:`StartCache`).
+smaller). Sources are computed once per instance (and γ) in a batch (the caller's
+:class:`StartSources` caches them).
 """
 
 from __future__ import annotations
@@ -47,7 +51,7 @@ import numpy as np
 
 from ..instances import node_width
 
-__all__ = ["INITS", "WARM_INITS", "AUTO_RADIUS", "Start", "StartCache", "build_start", "member_start",
+__all__ = ["INITS", "WARM_INITS", "AUTO_RADIUS", "Start", "StartSources", "build_start", "member_start",
            "check_warm_settings", "delayed_gamma", "state_std"]
 
 #: The GRNN's initializations: the paper's random draw, a static design embedded (warm start), or
@@ -143,95 +147,58 @@ class Start:
 
 
 def _usable(design) -> bool:
-    from baselines.stabilizing import is_stable
-
-    from ..status import USABLE
+    from ..status import USABLE, is_stable
 
     return (design is not None and design.status in USABLE and design.controller is not None
             and is_stable(design.extras.get("spectral_radius", np.inf)))
 
 
-class StartCache:
-    """The source designs of a batch's warm starts, each computed once per instance (and γ)."""
+class StartSources:
+    """Where a warm start's static designs come from: the method layer's designs, by the caller.
 
-    def __init__(self):
-        self._designs: dict = {}
-
-    def _get(self, instance, key, compute):
-        full = (id(instance), key)
-        if full not in self._designs:
-            self._designs[full] = (instance, compute())  # the instance kept alive: its id stays its own
-        return self._designs[full][1]
+    A subclass answers the three questions a warm start asks of an instance; each returns a
+    :class:`~codesign.design.Design` (a static controller with ``extras["spectral_radius"]``)
+    or None. ``baselines.grnn.StartCache`` is the one the toolkit uses: the decentralized
+    gain, the delayed l1 path and the delayed gain polished on the given graph, each
+    computed once per instance in a batch.
+    """
 
     def diagonal(self, instance):
-        from baselines import decentralized
-
-        return self._get(instance, "diagonal", lambda: decentralized(instance))
+        """The best diagonal (decentralized) static gain."""
+        raise NotImplementedError
 
     def delayed_path(self, instance, gamma: float | None):
-        """The path's design at ``gamma`` (run on the grid (0, γ)), or its dense end (``gamma`` None or 0)."""
-        from baselines import sparse_delayed
-
-        gamma = float(gamma or 0.0)
-        if gamma == 0.0:
-            return self._get(instance, ("delayed", 0.0),
-                             lambda: sparse_delayed(instance, gammas=[0.0], diagonal_end=False)[0])
-        dense_end, design = self._get(instance, ("delayed", gamma), lambda: tuple(
-            sparse_delayed(instance, gammas=[0.0, gamma], diagonal_end=False)))
-        self._designs.setdefault((id(instance), ("delayed", 0.0)), (instance, dense_end))  # the same first point
-        return design
+        """The delayed l1 path's design at ``gamma`` (run on the grid (0, γ)), or its dense end (None or 0)."""
+        raise NotImplementedError
 
     def delayed_given(self, instance):
         """The delayed gain polished on the given graph's links, from the diagonal gain (None if it has none)."""
-        return self._get(instance, ("delayed", "given"), lambda: _polished_on_graph(instance, self.diagonal(instance)))
+        raise NotImplementedError
 
 
-def _polished_on_graph(instance, diagonal):
-    from baselines import DelayedStaticGain
-    from baselines.sparse_delayed import delayed_gain_cost, stabilizing_delayed
-    from baselines._sparse import DecentralizedCache
-    from baselines.stabilizing import is_stable
-
-    from ..design import Design, count_links
-    from ..status import DIVERGED, OPTIMAL
-
-    if not _usable(diagonal):
-        return None
-    cache = DecentralizedCache(instance)
-    cache._design = diagonal
-    free = instance.expand_blocks(instance.comm_adj != 0) & ~instance.block_mask()
-    found = stabilizing_delayed(instance, diagonal.controller.K, np.zeros((instance.m, instance.n)), free,
-                                decentral=cache)
-    local, K_delayed = found.gain
-    nodes = {} if instance.scalar_nodes else dict(state_nodes=instance.state_nodes, input_nodes=instance.input_nodes)
-    gain = DelayedStaticGain(local, K_delayed, **nodes)
-    links, self_loops = count_links(instance.node_support(K_delayed + local))
-    extras = {"spectral_radius": float(found.radius)}
-    if not is_stable(found.radius):
-        return Design.failure("sparse_delayed", {"graph": "given"}, DIVERGED, "no stabilizing delayed gain on the "
-                              "given graph", info_model="delayed", extras=extras)
-    return Design(method="sparse_delayed", params={"graph": "given"}, controller=gain,
-                  cost=float(delayed_gain_cost(instance, local, K_delayed)), links=links, self_loops=self_loops,
-                  info_model="delayed", status=OPTIMAL, cost_kind="exact", extras=extras)
-
-
-def _source(cache: StartCache, instance, init: str, variant: str, beta):
+def _source(sources: StartSources | None, instance, init: str, variant: str, beta):
     """(design, source name, extras) of the design a warm start embeds (before any fallback)."""
+    if sources is None:
+        raise ValueError(f"init {init!r} starts from a design of the method layer, which this call was not given: "
+                         f"call baselines.grnn (or baselines.grnn_batch), which computes it, or pass start= "
+                         f"(a delayed static design, with init 'delayed')")
     if init == "diagonal":
-        return cache.diagonal(instance), "decentralized", {}
+        return sources.diagonal(instance), "decentralized", {}
     if variant == "sparse":
         gamma = delayed_gamma(instance, beta)
-        return cache.delayed_path(instance, gamma), "sparse_delayed", {"init_gamma": gamma}
+        return sources.delayed_path(instance, gamma), "sparse_delayed", {"init_gamma": gamma}
     if variant == "dense":
-        return cache.delayed_path(instance, 0.0), "sparse_delayed", {"init_gamma": 0.0}
-    return cache.delayed_given(instance), "sparse_delayed on the given graph", {}
+        return sources.delayed_path(instance, 0.0), "sparse_delayed", {"init_gamma": 0.0}
+    return sources.delayed_given(instance), "sparse_delayed on the given graph", {}
 
 
-def build_start(cache: StartCache, instance, settings, variant: str, beta, source=None) -> Start:
-    """The run's :class:`Start`: its source computed (once per instance in ``cache``) and embedded.
+def build_start(sources: StartSources | None, instance, settings, variant: str, beta, source=None) -> Start:
+    """The run's :class:`Start`: its source design (from ``sources``) embedded.
 
+    ``sources``: where the static designs come from (``baselines.grnn.StartCache``); None
+    where the caller has none, and then a start that needs one is a one-line ValueError.
     ``source``: with ``init = "delayed"``, the delayed design to start from, given by the
-    caller (a method of the method layer that found it, such as :func:`baselines.refit`)
+    caller (a method of the method layer that found it, such as ``baselines.refit``)
     instead of the one the variant's rule computes.
     """
     from ..evaluation import exact_cost
@@ -247,7 +214,7 @@ def build_start(cache: StartCache, instance, settings, variant: str, beta, sourc
         if source is not None and init == "delayed":
             design, name, extras = source, "the given delayed design", {}
         else:
-            design, name, extras = _source(cache, instance, init, variant, beta)
+            design, name, extras = _source(sources, instance, init, variant, beta)
         if not _usable(design):
             why = (getattr(design, "message", "") or getattr(design, "status", "")) if design is not None else ""
             reason = f"{name} gave no usable design" + (f" ({why})" if why else "")

@@ -34,6 +34,8 @@ PRESET_TIMES = {
     "scale-large": "~60 min (3486 s on 2026-11-28, with short tests beside it part of the time; 3806 s before)",
     "power": "~4 min (234 s measured on 2026-11-28)",
     "learned-class": "~35 min (2234 runs; measured once, on 2026-11-28)",
+    "topology": "~45 min from an empty store (3587 runs, 2753 s of runs on 2026-12-07; about 37 min with "
+                "learned-class's shared runs already stored)",
 }
 
 

@@ -125,8 +125,12 @@ def _multistart_minimum(instance, mask, starts: int, seed: int) -> float:
     return best
 
 
-def test_static_refits_at_n3_equal_exhaustive_references():
-    inst = paper_instance(0, n=3, degree=2, a_norm=1.1, horizon=20)
+@pytest.mark.parametrize("n", [3, pytest.param(4, marks=pytest.mark.slow)])  # N = 4: best_pattern's 4096 patterns
+def test_static_refits_equal_exhaustive_references(n):
+    """On every pattern best_pattern finds best for its link count, the refit on that graph costs what the
+    exhaustive search found (it starts there, so it may only polish); on random graphs, no more than an
+    independent multistart L-BFGS reference."""
+    inst = paper_instance(0, n=n, degree=2, a_norm=1.1, horizon=20)
     for best in best_pattern(inst):
         graph = design_graph(inst, best)
         refit = refit_design(inst, graph, "instantaneous", starts=[best])
@@ -134,9 +138,9 @@ def test_static_refits_at_n3_equal_exhaustive_references():
         assert refit.cost == pytest.approx(best.cost, rel=1e-7), best.params
     rng = np.random.default_rng(11)
     for _ in range(4):
-        graph = (rng.random((3, 3)) < 0.5) & ~np.eye(3, dtype=bool)
+        graph = (rng.random((n, n)) < 0.5) & ~np.eye(n, dtype=bool)
         refit = refit_design(inst, graph, "instantaneous")
-        reference = _multistart_minimum(inst, graph | np.eye(3, dtype=bool), starts=12, seed=int(rng.integers(1e6)))
+        reference = _multistart_minimum(inst, graph | np.eye(n, dtype=bool), starts=12, seed=int(rng.integers(1e6)))
         assert refit.cost <= reference * (1 + 1e-7), (graph_text(graph), refit.cost, reference)
 
 

@@ -15,6 +15,10 @@ it is one a table of the page gives. The sentences are chosen by rules, in this 
     over the best delayed static design at the budget where it is largest, its parts with any
     number of links, and divergence with and without the warm start on the system with the
     largest open-loop spectral radius.
+(0'') **Graph against controller.** Where the records hold refits (:mod:`compare.report.graph_gaps`),
+    instead of (0'): GRNN-Sparse's graph gap and controller gap within 20 and 60 links, the ℓ1
+    paths' (which graphs are the better ones), and whether the trained GRNN on the best static
+    graph beats the static gain on it.
 (a) **Failures.** A method that diverges or fails (:data:`codesign.status.DIVERGED`,
     :data:`~codesign.status.FAILED`) on at least half of a panel's instances, or whose
     median best cost there is above :data:`FAILURE_COST` × LQR, while another design
@@ -36,8 +40,8 @@ it is one a table of the page gives. The sentences are chosen by rules, in this 
     factor of :data:`DIFFICULTY_RATIO` or more in what doing nothing (u = 0) costs over LQR:
     that cost on the easiest and hardest of them, and the result's gap on each.
 
-Rules (0), (0') and (a) to (c) each add their sentences ((c) only where neither (0) nor
-(0') nor (b) did), (d) follows (c); the first :data:`MAX_SENTENCES` are kept.
+Rules (0), (0') or (0''), and (a) to (c) each add their sentences ((c) only where none of (0),
+(0'), (0'') and (b) did), (d) follows (c); the first :data:`MAX_SENTENCES` are kept.
 """
 
 from __future__ import annotations
@@ -53,14 +57,13 @@ from ..run.records import Records, as_records, canonical_key
 from .decomposition import decomposition_sentences
 from .findings import BOUND_LABEL, Comparison, Pooled, budgets_per_node, pooled_rows
 from .ladder import ladder_lines
-from .names import join_words, short_names
+from .graph_gaps import graph_gap_sentences
+from .names import MAX_WORDS, join_words, short_names, words
 
 __all__ = ["answer_lines", "MAX_SENTENCES", "MAX_WORDS", "FAILURE_COST", "DIFFICULTY_RATIO", "words"]
 
 #: At most this many sentences.
 MAX_SENTENCES = 3
-#: At most this many words in a sentence (:func:`words`).
-MAX_WORDS = 40
 #: A method whose median best cost on a panel is above this many times LQR's fails there in effect.
 FAILURE_COST = 10.0
 #: Panels differ in difficulty when u = 0's excess cost over LQR differs by this factor or more.
@@ -71,11 +74,6 @@ _NOTHING = "autonomous"
 _VERBS = {DIVERGED: ("diverges", "diverge"), FAILED: ("fails", "fail")}
 #: Spec keys that tell no two systems apart (:mod:`compare.report.ladder`'s rule).
 _NOT_SYSTEM = ("seed", "sha256")
-
-
-def words(text: str) -> int:
-    """Words as the limits count them: whitespace-separated tokens with a letter or a digit."""
-    return sum(1 for w in text.split() if any(ch.isalnum() for ch in w))
 
 
 # --------------------------------------------------------------------------- wording
@@ -532,7 +530,7 @@ def answer_lines(records, comparisons: Sequence[Comparison], *, meta=None, membe
     cell_names = panel_names(list(dict.fromkeys(c.panel for c in comparisons))) if comparisons else {}
     flagged: set = set()
     ladder, ladder_details = ladder_lines(records, meta, members)
-    parts = decomposition_sentences(records)
+    parts = graph_gap_sentences(records) or decomposition_sentences(records)
     sentences = ladder + parts + failure_sentences(records, report_names, flagged)
     reproduction = reproduction_sentences(records, meta, members)
     sentences += reproduction

@@ -34,14 +34,19 @@ import numpy as np
 
 from ..run.records import OK_STATUSES, as_records
 from .decomposition import system_of, system_title
+from .names import MAX_WORDS, join_words, short_names, words
 from .statistics import median_interval, panel_budgets
 
 __all__ = ["GapRow", "LearnedRow", "graph_values", "graph_gaps", "learned_on_best_graph", "graph_gap_section",
-           "plot_graph_gaps", "MODELS", "is_refit"]
+           "graph_gap_sentences", "plot_graph_gaps", "MODELS", "L1_PATHS", "OPENING_BUDGETS", "is_refit"]
 
 #: The information models a graph is valued in (``none`` designs count in both).
 MODELS = ("delayed", "instantaneous")
 _DELAYED_STATIC = "delayed_static_gain"
+#: The methods the opening calls the l1 paths: sparse gains from a weighted-l1 penalty swept over a grid.
+L1_PATHS = ("sparse_delayed", "sparse_admm", "sparse_newton", "sparse_sdp")
+#: The budgets the opening states the gaps at (links; those of them the system's panels have).
+OPENING_BUDGETS = (20, 60)
 
 
 def is_refit(r) -> bool:
@@ -112,6 +117,7 @@ class GapRow:
     excess: Part
     graph: Part
     controller: Part
+    method: str = ""
 
 
 def _method_designs(records) -> dict:
@@ -122,6 +128,10 @@ def _method_designs(records) -> dict:
             continue
         out[(system_of(r), r.label, r.info_model)][r.instance.key].append(r)
     return out
+
+
+def _method_of(by_instance) -> str:
+    return next((r.method for designs in by_instance.values() for r in designs), "")
 
 
 def _refit_graphs(records) -> set:
@@ -159,7 +169,8 @@ def graph_gaps(records) -> list[GapRow]:
                 graph.append(value - floor)
                 controller.append(best.cost - value)
             if excess:
-                rows.append(GapRow(system, label, model, budget, Part.of(excess), Part.of(graph), Part.of(controller)))
+                rows.append(GapRow(system, label, model, budget, Part.of(excess), Part.of(graph), Part.of(controller),
+                                   method=_method_of(by_instance)))
     return rows
 
 
@@ -239,43 +250,115 @@ def _pct(x: float) -> str:
 def _cell(p: Part) -> str:
     if not p.instances:
         return "–"
+    if p.instances == 1:  # one instance: its value, no interval
+        return _pct(p.median)
     cover = f" ({p.coverage:.0%})" if p.coverage < 0.95 else ""
     return f"{_pct(p.median)} [{_pct(p.low)}, {_pct(p.high)}]{cover}"
 
 
-def _headline(rows: list[GapRow], learned: list[LearnedRow]) -> list[str]:
-    """The section's three sentences: who picks the better graphs, GRNN-Sparse's split, the GRNN on the best graph."""
+def _main_system(rows) -> tuple:
+    """The system the opening speaks of: the one with the most paired instances (then by name)."""
+    return max({r.system for r in rows},
+               key=lambda s: (sum(r.excess.instances for r in rows if r.system == s), str(s)))
+
+
+def _opening_budgets(rows) -> list:
+    found = {r.budget for r in rows}
+    return [b for b in OPENING_BUDGETS if b in found] or sorted(b for b in found if b is not None)[:1]
+
+
+def _within(budgets) -> str:
+    return f"within {join_words([f'{b:g}' for b in budgets])} links"
+
+
+def _stated(*candidates) -> str | None:
+    """The first candidate sentence of at most :data:`MAX_WORDS` words (None if none is)."""
+    return next((c for c in candidates if c and words(c) <= MAX_WORDS), None)
+
+
+def _grnn_sentence(here, budgets, title: str) -> str | None:
+    """GRNN-Sparse's graph gap and controller gap at each opening budget, with intervals."""
+    grnn = [r for r in here if r.method == "grnn_sparse" and r.budget in budgets and r.graph.instances]
+    if not grnn:
+        return None
+    names = short_names({r.label for r in grnn})
+    label = min({r.label for r in grnn}, key=lambda x: (names[x] != "GRNN-Sparse", x))
+    mine = sorted((r for r in grnn if r.label == label), key=lambda r: budgets.index(r.budget))
+    parts = [f"{_pct(r.graph.median)} {_interval(r.graph)} and {_pct(r.controller.median)} {_interval(r.controller)} "
+             f"within {r.budget:g} links" for r in mine]
+    short = [f"{_pct(r.graph.median)} and {_pct(r.controller.median)} within {r.budget:g} links" for r in mine]
+    lead = f"On {title}, {names[label]}'s graph gap and controller gap, in % of LQR's cost, are"
+    return _stated(f"{lead} {'; '.join(parts)}.", f"{lead} {'; '.join(short)} (medians).")
+
+
+def _paths_sentence(here, budgets) -> str | None:
+    """Which graphs the l1 paths pick: their graph gaps at the opening budgets, and their largest controller gap."""
+    paths = [r for r in here if r.method in L1_PATHS and r.budget in budgets and r.graph.instances]
+    if not paths:
+        return None
+    labels = list(dict.fromkeys(r.label for r in sorted(paths, key=lambda r: r.label)))
+    names = short_names(labels)
+    controller = max(paths, key=lambda r: r.controller.median)
+    tail = f", with controller gaps of at most {_pct(controller.controller.median)}"
+    who = join_words(names[x] for x in labels)
+    if all(r.graph.median == 0 for r in paths):
+        top = max(r.graph.high for r in paths)
+        gap = "graph gap 0" if top == 0 else f"median graph gap 0, intervals up to {_pct(top)}"
+        return _stated(f"{who} pick the best graphs found {_within(budgets)} ({gap}){tail}.",
+                       f"{who} pick the best graphs found {_within(budgets)} ({gap}).")
+    gaps = [f"{names[r.label]} {_pct(r.graph.median)} {_interval(r.graph)} within {r.budget:g}" for r in
+            sorted(paths, key=lambda r: (labels.index(r.label), budgets.index(r.budget)))]
+    plain = [f"{names[r.label]} {_pct(r.graph.median)} within {r.budget:g}" for r in
+             sorted(paths, key=lambda r: (labels.index(r.label), budgets.index(r.budget)))]
+    return _stated(f"The ℓ1 paths' graph gaps are {join_words(gaps)}{tail}.",
+                   f"The ℓ1 paths' graph gaps are {join_words(gaps)}.",
+                   f"The ℓ1 paths' graph gaps are {join_words(plain)} (medians).")
+
+
+def _verdict(p: Part) -> str:
+    return "beats" if p.high < 0 else "costs more than" if p.low > 0 else "does not clearly beat"
+
+
+def _learned_sentence(learned, system, budgets) -> str | None:
+    """Whether the trained GRNN on the best static graph beats the static gain on it, per opening budget."""
+    mine = [x for x in learned if x.system == system and x.budget in budgets]
+    activation = "tanh" if any(x.activation == "tanh" for x in mine) else min((x.activation for x in mine),
+                                                                             default=None)
+    mine = sorted((x for x in mine if x.activation == activation), key=lambda x: budgets.index(x.budget))
+    if not mine:
+        return None
+    verdicts = {_verdict(x.difference) for x in mine}
+    values = [f"{_pct(x.difference.median)} {_interval(x.difference)}" for x in mine]
+    subject = f"the trained {activation} GRNN"
+    if len(verdicts) == 1:
+        lead = f"On the best static graph {_within([x.budget for x in mine])}, {subject} {verdicts.pop()} the static gain"
+        return _stated(f"{lead} on it: {join_words(values)}.", f"{lead} on it.")
+    parts = [f"within {x.budget:g} links it {_verdict(x.difference)} it ({v})" for x, v in zip(mine, values)]
+    return _stated(f"Against the static gain on the best static graph, {subject}: {'; '.join(parts)}.",
+                   f"Against the static gain on the best static graph, {subject}: "
+                   f"{'; '.join(f'within {x.budget:g} links it {_verdict(x.difference)} it' for x in mine)}.")
+
+
+def graph_gap_sentences(records) -> list[str]:
+    """The opening's three sentences where the records hold refits (:mod:`compare.report.answer`, rule (0'')).
+
+    On the system with the most instances: GRNN-Sparse's graph gap and controller gap within
+    :data:`OPENING_BUDGETS` links, with intervals; which graphs the l1 paths pick (their graph gaps,
+    and their largest controller gap); and whether the trained GRNN on the best static graph beats
+    the static gain on it. Each at most :data:`~compare.report.names.MAX_WORDS` words; every
+    number one the section's tables print.
+    """
+    records = as_records(records)
+    rows = graph_gaps(records)
     if not rows:
         return []
-    system = max({r.system for r in rows},
-                 key=lambda s: (sum(r.excess.instances for r in rows if r.system == s), str(s)))
+    system = _main_system(rows)
     here = [r for r in rows if r.system == system]
-    budget = next((b for b in (20, 60) if any(r.budget == b for r in here)),
-                  min((r.budget for r in here if r.budget is not None), default=None))
-    at = [r for r in here if r.budget == budget and r.graph.instances]
-    sentences = []
-    if at:
-        ranked = sorted(at, key=lambda r: r.graph.median)
-        sentences.append(f"On {system_title(system)} within {budget} links, {ranked[0].label} picks the best graphs "
-                         f"(median graph gap {_pct(ranked[0].graph.median)}) and {ranked[-1].label} the worst "
-                         f"({_pct(ranked[-1].graph.median)}).")
-    grnn = [r for r in at if "GRNN-Sparse" in r.label and "per-node" not in r.label.lower()
-            and "linear" not in r.label.lower()]
-    if grnn:
-        g = grnn[0]
-        sentences.append(f"Of {g.label}'s excess there, {_pct(g.graph.median)} {_interval(g.graph)} is its graph and "
-                         f"{_pct(g.controller.median)} {_interval(g.controller)} its controller "
-                         f"({g.excess.instances} instances).")
-    mine = [x for x in learned if x.system == system and x.budget == budget and x.activation == "tanh"] or \
-        [x for x in learned if x.system == system and x.budget == budget]
-    if mine:
-        x = mine[0]
-        verdict = ("beats" if x.difference.high < 0 else "costs more than" if x.difference.low > 0
-                   else "does not clearly beat")
-        sentences.append(f"On the best static graph within {budget} links, the trained {x.activation} GRNN {verdict} "
-                         f"the static gain: {_pct(x.difference.median)} {_interval(x.difference)}, better on "
-                         f"{x.grnn_wins} of {x.difference.instances} instances.")
-    return [" ".join(sentences), ""] if sentences else []
+    budgets = _opening_budgets(here)
+    title = system_title(system)
+    learned = learned_on_best_graph(records)
+    return [s for s in (_grnn_sentence(here, budgets, title), _paths_sentence(here, budgets),
+                        _learned_sentence(learned, system, budgets)) if s]
 
 
 def _interval(p: Part) -> str:
@@ -289,8 +372,7 @@ def graph_gap_section(records, save=None) -> list[str]:
     if not rows:
         return []
     learned = learned_on_best_graph(records)
-    lines = ["## Graph against controller", ""]
-    lines += _headline(rows, learned)
+    lines = ["## Graph against controller", ""]  # its answer is the report's opening (graph_gap_sentences)
     if save is not None:
         from .styles import label_styles
 
@@ -367,19 +449,23 @@ def plot_graph_gaps(rows, *, axes=None, styles=None):
         width = 0.8 / (2 * max(1, len(mine)))
         for k, label in enumerate(mine):
             for part in ("graph", "controller"):
-                xs, ys, lo, hi = [], [], [], []
+                xs, ys, lo, hi, kept = [], [], [], [], []
                 for j, budget in enumerate(budgets):
                     row = next((r for r in here if r.label == label and r.budget == budget), None)
                     if row is None:
                         continue
+                    kept.append(budget)
                     p = getattr(row, part)
                     xs.append(j - 0.4 + (2 * k + (part == "controller") + 0.5) * width)
                     ys.append(100 * p.median)
                     lo.append(100 * (p.median - p.low))
                     hi.append(100 * (p.high - p.median))
                 graph = part == "graph"
-                ax.bar(xs, ys, width, color=colour(label), alpha=0.45 if graph else 0.95,
-                       hatch="///" if graph else None, edgecolor="white" if graph else colour(label), linewidth=0.0)
+                bars = ax.bar(xs, ys, width, color=colour(label), alpha=0.45 if graph else 0.95,
+                              hatch="///" if graph else None, edgecolor="white" if graph else colour(label),
+                              linewidth=0.0)
+                for bar, budget in zip(bars, kept):  # what tests/test_graph_gaps_figure.py reads back
+                    bar.set_gid(f"graph_gaps:{system_title(system)}:{label}:{part}:{_budget(budget)}")
                 ax.errorbar(xs, ys, yerr=[lo, hi], fmt="none", ecolor="0.25", elinewidth=0.8, capsize=1.5)
         ax.axhline(0.0, color="0.5", linewidth=0.8)
         ax.set_xticks(range(len(budgets)), [_budget(b) for b in budgets])

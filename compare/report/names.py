@@ -1,14 +1,17 @@
 """Method labels as the answer names them: without their trailing training settings where that stays unambiguous.
 
 Shared by :mod:`compare.report.answer` and :mod:`compare.report.ladder`, which name the same methods; and
-the one way the report's sentences list things (:func:`join_words`).
+the one way the report's sentences list things (:func:`join_words`) and count their words (:func:`words`).
 """
 
 from __future__ import annotations
 
 import re
 
-__all__ = ["SETTINGS_SUFFIX", "join_words", "short_names"]
+__all__ = ["SETTINGS_SUFFIX", "MAX_WORDS", "join_words", "short_names", "words"]
+
+#: At most this many words in a sentence of the report's answer (:func:`words`).
+MAX_WORDS = 40
 
 #: A trailing parenthesis that names training settings, not the design: "(β path, 150 steps, 3 hops)".
 SETTINGS_SUFFIX = re.compile(r" \((β path|γ path|\d+ steps)[^()]*\)$")
@@ -29,3 +32,8 @@ def join_words(parts) -> str:
     """"a", "a and b", "a, b and c": a list as the report's sentences write it."""
     parts = list(parts)
     return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
+
+
+def words(text: str) -> int:
+    """Words as the limits count them: whitespace-separated tokens with a letter or a digit."""
+    return sum(1 for w in text.split() if any(ch.isalnum() for ch in w))

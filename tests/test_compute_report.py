@@ -71,7 +71,7 @@ def test_cells_split_design_and_scoring_seconds_over_usable_runs_only_and_keep_t
     assert (b.n, b.completed, b.why_not, b.peak_mb) == (20, 0, "too large", 310.0) and math.isnan(b.design_seconds)
     text = compute_markdown([a, b])
     assert "none of 2 runs completed" in text and "m, N = 20: 2 of 2: too large" in text
-    assert "| 2.25, 0.75, 40 (2) |" in text and "too few sizes (1)" in text and NOT_MEASURED not in text
+    assert "| m | 10 | 2.25 | 0.75 | 40 | 2 |" in text and "too few sizes (1)" in text and NOT_MEASURED not in text
 
 
 def test_scoring_seconds_are_the_measured_ones_and_unmeasured_ones_stay_unknown():
@@ -87,7 +87,7 @@ def test_scoring_seconds_are_the_measured_ones_and_unmeasured_ones_stay_unknown(
     assert old.design_seconds == 1.0 and math.isnan(old.scoring_seconds) and math.isnan(old.memory_mb)
     assert old.peak_mb == 300.0  # the whole peak is still known; it is just not what the report draws
     text = compute_markdown([m, old, u])
-    assert "| old | 1, ?, ? (1) |" in text
+    assert "| old | 10 | 1 | ? | ? | 1 |" in text
     # a store mixing runs from before the measurements with later ones says so
     assert "? : scoring seconds and memory added were not measured in some of this report's runs" in text
 
@@ -123,7 +123,7 @@ def test_table_fits_growth_only_from_four_sizes_and_counts_runs_and_instances():
     lines = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
     cells = [c.strip() for c in lines["four"].strip(" |").split("|")]
     assert cells[-2:] == ["2.00", "1.00"]  # design time ∝ N^2, memory added (0.01 MB per node) ∝ N
-    assert "too few sizes (3)" in lines["three"] and "0.5, 0.5, 10 (1)" in lines["three"]
+    assert "too few sizes (3)" in lines["three"] and "| three | 40 | 0.5 | 0.5 | 10 | 1 |" in text
     assert "no measurable design time" in lines["free"] and "no measurable memory added" in lines["free"]
     assert instances_per_size(records) == {10: 3, 20: 3, 40: 3, 80: 3}
 
@@ -217,8 +217,9 @@ def test_compute_section_in_a_report_that_asks_for_it(tmp_path):
     text = (out / "report.md").read_text()
     assert "## Compute against network size" in text and (out / "compute.png").exists()
     table = text.split("## Compute against network size", 1)[1]
-    assert "N = 6: design s, scoring s, MB added (runs)" in table
-    assert "N = 12: design s, scoring s, MB added (runs)" in table
+    assert "| method | N | design s | scoring s | MB added | runs |" in table
+    assert {line.split("|")[2].strip() for line in table.splitlines()
+            if line.startswith("| ") and line.count("|") == 7} >= {"6", "12"}
     assert "too few sizes" in table and "2 instances at each N" in table
     assert NOT_MEASURED not in table and "grows as N^" not in table  # measured; two sizes state no growth
     # the SDP's size guard (12 states > max_states = 8) is reported, not timed
@@ -340,7 +341,7 @@ def test_a_report_folder_from_before_the_measurements_rebuilds_saying_they_were_
     for page in (text, again):
         compute = page.split("## Compute against network size", 1)[1]
         assert f"scoring seconds and memory added were {NOT_MEASURED}" in compute
-        assert "| m | 0.1, ?, ? (2) |" in compute
+        assert "| m | 10 | 0.1 | ? | ? | 2 |" in compute
         assert f"- m: design time grows as N^1.0; memory added was {NOT_MEASURED}." in compute
     assert (tmp_path / "again" / "runs.csv").read_bytes() == (tmp_path / "first" / "runs.csv").read_bytes()
 

@@ -35,9 +35,21 @@ def _records():
     return out
 
 
-def _row(text, label):
-    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
+def _row(text, label, a_norm=None):
+    """The label's row of the table for ``a_norm`` (one table per ‖A‖₂, each under its bold heading; None:
+    the first)."""
+    heading = "**‖A‖₂ = " if a_norm is None else f"**‖A‖₂ = {a_norm:g}**"
+    table = text.split(heading, 1)[1].split("**‖A‖₂", 1)[0]
+    rows = {line.split("|")[1].strip(): line for line in table.splitlines() if line.startswith("| ")}
     return [c.strip() for c in rows[label].split("|")[1:-1]]
+
+
+def test_table1_is_one_narrow_table_per_norm():
+    text = table1_markdown(_records())
+    assert text.count("**‖A‖₂ = 0.995**") == 1 and text.count("**‖A‖₂ = 1.05**") == 1
+    headers = [line for line in text.splitlines() if line.startswith("| Method")]
+    assert len(headers) == 2 and all(h.count("|") == 9 for h in headers)  # 8 columns each
+    assert _row(text, "GRNN", 1.05)[4] == f"{PAPER_TABLE1['grnn'][1.05]:.3f}"
 
 
 def test_table1_statistics_and_paper_values():

@@ -100,7 +100,8 @@ def test_the_compute_section_takes_n_from_the_spec_and_lists_every_size_that_fai
     text = _report(Records.from_rows(rows), tmp_path / "report")
     compute = text.split("## Compute against network size", 1)[1].split("\n## ", 1)[0]
     # rows stored without scoring seconds or a memory baseline: unknown, not the wall time less the design's
-    assert "| lqr | none of 1 runs completed | 0.01, ?, ? (2) | none of 1 runs completed |" in compute
+    assert ("| lqr | 8 | – | – | – | none of 1 runs completed |\n| lqr | 12 | 0.01 | ? | ? | 2 |\n"
+            "| lqr | 100000 | – | – | – | none of 1 runs completed |") in compute
     assert f"- lqr, N = 8: 1 of 1: {NAN_MESSAGE}" in compute
     assert f"- lqr, N = 100000: 1 of 1: {HUGE_MESSAGE}" in compute
 

@@ -4,9 +4,9 @@ In a headless Chromium (Playwright) at an 800 px window, every ``<details>`` ope
 included), each table's box (``.table-wrap``) must show the whole table (its scroll width at most
 its width), and each header cell must hold at most two lines of text. Issue 61 measured pair tables
 wrapping "first − second" onto 7 to 9 lines and the gap table running off the page; the findings,
-ladder and pair tables are laid out to fit. ``COMPARE_REPORTS=FOLDER`` checks the report folders in
-FOLDER instead. Tables that other modules write (Table 1's, the compute table) are reported, not
-failed, where they are listed in :data:`NOT_YET`.
+ladder and pair tables are laid out to fit. Table 1 is one table per ‖A‖₂ and the
+compute table one row per method and N, so that they fit too. ``COMPARE_REPORTS=FOLDER`` checks
+the report folders in FOLDER instead.
 """
 
 from __future__ import annotations
@@ -21,9 +21,6 @@ from test_report_browser import _browser_path  # noqa: E402  (tests/test_report_
 REPORTS = Path(os.environ.get("COMPARE_REPORTS") or Path(__file__).resolve().parents[1] / "reports")
 SHIPPED = sorted(p.name for p in REPORTS.iterdir() if (p / "report.html").exists())
 WIDTH = 800
-#: Sections whose tables other modules write, not laid out for 800 px yet (issue 61 lists them): reported by
-#: name here rather than failed.
-NOT_YET = ("Table 1", "Compute against network size")
 
 _CHECK = """() => {
   for (const d of document.querySelectorAll('details')) d.open = true;
@@ -70,8 +67,6 @@ def test_every_table_fits_800_px_and_no_header_wraps_past_two_lines(tab, name):
     tables = tab.evaluate(_CHECK)
     problems = []
     for t in tables:
-        if t["heading"].startswith(NOT_YET):
-            continue
         if t["over"] > 1:
             problems.append(f"{t['heading'][:50]!r} (first header {t['first']!r}): {t['over']} px too wide")
         if t["lines"] > 2:

@@ -502,7 +502,8 @@ def _not_measured_note(cells) -> str:
 
 
 def compute_markdown(cells) -> str:
-    """The compute table: per method and N, design and scoring seconds per design, memory added and runs timed.
+    """The compute tables: per method and N, design and scoring seconds per design, memory added and runs timed;
+    then per method how design time and memory grow with N.
 
     A value the runs did not measure is "?", and a note under the table says which
     (scoring seconds and memory added are not recorded in stores and report folders
@@ -511,29 +512,28 @@ def compute_markdown(cells) -> str:
     sizes = sorted({c.n for c in cells})
     labels = sorted({c.label for c in cells})
     by = {(c.label, c.n): c for c in cells}
-    head = ("| method | " + " | ".join(f"N = {n}: design s, scoring s, MB added (runs)" for n in sizes)
-            + " | design time ∝ N^k | memory added ∝ N^m |")
-    lines = [head, "|---|" + "---|" * (len(sizes) + 2)]
+    # Long format, one row per method and N, and the growth exponents in a table of their own: a column per
+    # N with three numbers per cell ran off the page at 800 px (issue 61).
+    lines = ["| method | N | design s | scoring s | MB added | runs |", "|---|---:|---:|---:|---:|---|"]
+    growth = ["| method | design time ∝ N^k | memory added ∝ N^m |", "|---|---|---|"]
     notes = {}
     for label in labels:
-        row = [label]
         timed = []
         for n in sizes:
             c = by.get((label, n))
             if c is None:
-                row.append("not run")
                 continue
             if c.completed < c.runs:
                 notes[(label, n)] = c
             if c.completed == 0:
-                row.append(f"none of {c.runs} runs completed")
+                lines.append(f"| {label} | {n} | – | – | – | none of {c.runs} runs completed |")
                 continue
             timed.append(c)
-            mb = _fmt_mb(c.memory_mb)
             runs = f"{c.completed}" if c.completed == c.runs else f"{c.completed} of {c.runs} completed"
-            row.append(f"{_fmt_seconds(c.design_seconds)}, {_fmt_seconds(c.scoring_seconds)}, {mb} ({runs})")
-        row += [_growth_text(timed, "design_seconds"), _growth_text(timed, "memory_mb")]
-        lines.append("| " + " | ".join(row) + " |")
+            lines.append(f"| {label} | {n} | {_fmt_seconds(c.design_seconds)} | {_fmt_seconds(c.scoring_seconds)} | "
+                         f"{_fmt_mb(c.memory_mb)} | {runs} |")
+        growth.append(f"| {label} | {_growth_text(timed, 'design_seconds')} | {_growth_text(timed, 'memory_mb')} |")
+    lines += [""] + growth
     text = "\n".join(lines)
     note = _not_measured_note(cells)
     if note:
@@ -575,10 +575,10 @@ def _caption(instances: dict) -> str:
         f"table). A hollow marker, annotated with its count, rests on fewer than {FEW_RUNS} runs. The legend "
         "(bottom right) groups methods by information model (its line style heads each group) and gives, "
         f"where a method has design timings at {MIN_SIZES} or more sizes, the slope k of a least-squares fit of log design time "
-        f"against log N (time ∝ N^k); with fewer sizes no growth is fitted (\"too few sizes\" in the table), "
-        "and the table's last column fits the memory added alike. "
-        "Table cells: design seconds per design, scoring seconds per design, MB added, and in parentheses the "
-        "runs behind them."
+        f"against log N (time ∝ N^k); with fewer sizes no growth is fitted (\"too few sizes\"). "
+        "The first table gives, per method and N, the design seconds per design, the scoring seconds per "
+        "design, the MB added and the runs behind them; the second, the fitted growth of design time and "
+        "of memory added."
     )
 
 

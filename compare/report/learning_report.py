@@ -316,17 +316,16 @@ def table1_markdown(records) -> str:
     if not groups or not a_norms:
         return "_No records for Table 1._\n"
 
-    header = ["Method"]
-    for a in a_norms:
-        header += [f"‖A‖₂ = {a:g}: median", "95 % CI", "mean", "paper", "Δ", "ok", "links (w/ self-loops)"]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    header = ["Method", "median", "95 % CI", "mean", "paper", "Δ", "ok", "links (w/ self-loops)"]
+    # One table per ‖A‖₂: side by side, seven columns per norm ran off the page at 800 px (issue 61).
+    tables = {a: [f"**‖A‖₂ = {a:g}**", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+              for a in a_norms}
     notes = []
     outside = []
     edge_gaps = []
     for method, label in keys:
         rows = groups[(method, label)]
         linear = any(r.params.get("activation") == "identity" for r in rows)
-        cells = [label]
         for a in a_norms:
             here = [r for r in rows if _a_norm(r) == a]
             good = [r for r in here if r.ok]
@@ -337,13 +336,13 @@ def table1_markdown(records) -> str:
             link_cell, edge_gap = _link_cell(good, paper_edges=edges)
             if edge_gap:
                 edge_gaps.append((label, a, *edge_gap, edges))
-            cells += cost.cells() + [f"{len(good)}/{len(here)}", link_cell]
-        lines.append("| " + " | ".join(cells) + " |")
+            tables[a].append("| " + " | ".join([label] + cost.cells() + [f"{len(good)}/{len(here)}", link_cell]) + " |")
         if any(r.status not in OK_STATUSES for r in rows):
             statuses = defaultdict(int)
             for r in rows:
                 statuses[r.status] += 1
             notes.append(f"{label}: " + ", ".join(f"{v} {k}" for k, v in sorted(statuses.items())))
+    lines = [line for a in a_norms for line in tables[a] + [""]][:-1]
     text = "\n".join(lines) + "\n" + _caption()
     text += _variant_pairs(records, a_norms)
     if outside:

@@ -2,7 +2,8 @@
 
 Every bar of ``graph_gaps.png`` (a method's median graph or controller gap within a budget) is the
 median its table prints, and every table cell has its bar; the opening quotes GRNN-Sparse's graph
-and controller gaps within 20 and 60 links on the paper family as those cells print them.
+and controller gaps within 20 and 60 links on the paper family, and the l1 paths' controller gaps,
+as those cells print them.
 """
 
 from __future__ import annotations
@@ -80,4 +81,8 @@ def test_the_opening_quotes_grnn_sparse_cells_at_20_and_60_links(shipped):
                         if s == system and label.startswith("GRNN-Sparse") and b == budget and p == part)
             quoted = cell.split(" (")[0]  # without a coverage note
             assert quoted in opening, (budget, part, quoted)
+    for label in ("Sparse delayed K (l1)", "Sparse K (l1 ADMM)"):  # the l1 paths' controller gaps, as printed
+        for budget in ("≤ 20", "≤ 60"):
+            cell = cells[(system, label, budget, "controller")].split(" (")[0]
+            assert cell in opening or cell.startswith("0 % [0 %, 0 %]"), (label, budget, cell)
     assert re.search(r"GRNN (beats|costs more than|does not clearly beat) the static gain", opening)

@@ -28,7 +28,8 @@ STATIC = {
     "refit": [{"graph": "0-1,1-2,3-0", "controller": "delayed"},
               {"graph": "0-1,1-2,3-0", "controller": "instantaneous"}],
 }
-NOT_STATIC = {"autonomous", "sls", "sls_topologies", "sls_local"}
+#: The GRNN methods are registered by baselines/grnn.py (the trainer with its warm starts' static designs).
+NOT_STATIC = {"autonomous", "sls", "sls_topologies", "sls_local", "grnn", "grnn_dense", "grnn_fixed", "grnn_sparse"}
 
 
 def unstable(seed):

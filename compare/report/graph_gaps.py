@@ -291,28 +291,37 @@ def _grnn_sentence(here, budgets, title: str) -> str | None:
     return _stated(f"{lead} {'; '.join(parts)}.", f"{lead} {'; '.join(short)} (medians).")
 
 
+def _zero(p: Part) -> bool:
+    return p.median == 0 and p.high == 0 and p.low == 0
+
+
 def _paths_sentence(here, budgets) -> str | None:
-    """Which graphs the l1 paths pick: their graph gaps at the opening budgets, and their largest controller gap."""
+    """Which graphs the l1 paths pick (their graph gaps) and their controller gaps at the opening budgets."""
     paths = [r for r in here if r.method in L1_PATHS and r.budget in budgets and r.graph.instances]
     if not paths:
         return None
     labels = list(dict.fromkeys(r.label for r in sorted(paths, key=lambda r: r.label)))
     names = short_names(labels)
-    controller = max(paths, key=lambda r: r.controller.median)
-    tail = f", with controller gaps of at most {_pct(controller.controller.median)}"
-    who = join_words(names[x] for x in labels)
+    by_label = {x: sorted((r for r in paths if r.label == x), key=lambda r: budgets.index(r.budget)) for x in labels}
+
+    def controller(x, intervals: bool) -> str:
+        rows = by_label[x]
+        if all(_zero(r.controller) for r in rows):
+            return f"0 % for {names[x]}"
+        values = [_pct(r.controller.median) + (f" {_interval(r.controller)}" if intervals else "") for r in rows]
+        return f"{join_words(values)} for {names[x]}"
+
     if all(r.graph.median == 0 for r in paths):
         top = max(r.graph.high for r in paths)
-        gap = "graph gap 0" if top == 0 else f"median graph gap 0, intervals up to {_pct(top)}"
-        return _stated(f"{who} pick the best graphs found {_within(budgets)} ({gap}){tail}.",
-                       f"{who} pick the best graphs found {_within(budgets)} ({gap}).")
-    gaps = [f"{names[r.label]} {_pct(r.graph.median)} {_interval(r.graph)} within {r.budget:g}" for r in
-            sorted(paths, key=lambda r: (labels.index(r.label), budgets.index(r.budget)))]
-    plain = [f"{names[r.label]} {_pct(r.graph.median)} within {r.budget:g}" for r in
-             sorted(paths, key=lambda r: (labels.index(r.label), budgets.index(r.budget)))]
-    return _stated(f"The ℓ1 paths' graph gaps are {join_words(gaps)}{tail}.",
-                   f"The ℓ1 paths' graph gaps are {join_words(gaps)}.",
-                   f"The ℓ1 paths' graph gaps are {join_words(plain)} (medians).")
+        lead = (f"The ℓ1 paths pick the best graphs {_within(budgets)} (median graph gap 0"
+                + (")" if top == 0 else f", intervals up to {_pct(top)})"))
+    else:
+        lead = "The ℓ1 paths' graph gaps are " + join_words(
+            f"{names[x]}'s {join_words(_pct(r.graph.median) for r in by_label[x])}" for x in labels) + \
+            f" {_within(budgets)}"
+    return _stated(f"{lead}; controller gaps: {', '.join(controller(x, True) for x in labels)}.",
+                   f"{lead}; controller gaps: {', '.join(controller(x, False) for x in labels)}.",
+                   f"{lead}.")
 
 
 def _verdict(p: Part) -> str:

@@ -84,7 +84,10 @@ def _is_static_delayed(r) -> bool:
 
 
 def system_of(r) -> tuple:
-    """Panels pooled into one system: a family at one size."""
+    """Panels pooled into one system: a family at one size; a published grid at one damping on its own
+    (its panel's name, "ieee39 (d = 2)": two dampings of one grid are two systems)."""
+    if "case" in r.instance.spec:
+        return (r.instance.panel[0], None)
     return (r.instance.family, r.instance.nodes)
 
 

@@ -113,3 +113,33 @@ def test_a_graphless_source_is_counted_not_refit(tmp_path):
     assert len(refits) == 1 and refits[0].params["graph"] == "" and refits[0].ok
     assert summary.graphless == 1 and "no graph to refit" in str(summary)
     assert np.isfinite(refits[0].cost)
+
+
+EXACT = """
+[[methods]]
+method = "sparse_budget"
+params = { links = [2, 6, 12], info_model = "delayed", rounds = 1 }
+
+[[methods]]
+method = "refit"
+label = "Refit: linear GRNN"
+params = { controller = "grnn", activation = "identity", steps = 5, ensemble = 1 }
+sources = ["sparse_budget"]
+"""
+
+
+def test_a_learned_controller_at_every_exact_budget(tmp_path):
+    """sparse_budget's designs as sources with no budgets: the GRNN refit on each one's graph, so every exact
+    link budget has a learned design on exactly the best static graph found there, kept only below its start."""
+    spec = parse_spec(tiny_spec("exact", methods=("lqr",), seeds=1, a_norms=(1.05,), tail=EXACT))
+    with Store(tmp_path / "r.sqlite") as store:
+        run_experiment(spec, store, progress=False)
+        records = store.records()
+    budgets = [r for r in records if r.method == "sparse_budget" and r.ok]
+    learned = {r.extras["graph"]: r for r in records if r.method == "refit"}
+    assert len({r.extras["graph"] for r in budgets}) >= 2
+    for r in budgets:
+        grnn = learned[r.extras["graph"]]
+        assert grnn.extras["graph_links"] == r.links <= r.params["budget"]
+        assert grnn.ok and grnn.info_model == "delayed"
+        assert grnn.cost <= grnn.extras["start_cost"] * (1 + 1e-9)  # the delayed refit it started from, or lower

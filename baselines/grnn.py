@@ -20,9 +20,9 @@ from codesign.design import Design, count_links
 from codesign.learned.grnn import check_settings
 from codesign.learned.grnn import grnn as _trained_grnn
 from codesign.learned.grnn import grnn_batch as _trained_batch
-from codesign.learned.warm import StartSources
+from codesign.learned.warm import StartSources, usable_source
 from codesign.methods import method
-from codesign.status import DIVERGED, OPTIMAL, USABLE, is_stable
+from codesign.status import DIVERGED, OPTIMAL, is_stable
 
 from ._sparse import DecentralizedCache
 from .lqr import decentralized
@@ -60,14 +60,9 @@ class StartCache(StartSources):
         return self._get(instance, ("delayed", "given"), lambda: _polished_on_graph(instance, self.diagonal(instance)))
 
 
-def _usable(design) -> bool:
-    return (design is not None and design.status in USABLE and design.controller is not None
-            and is_stable(design.extras.get("spectral_radius", np.inf)))
-
-
 def _polished_on_graph(instance, diagonal):
     """The delayed gain polished on the given graph's links from the diagonal gain (None without one)."""
-    if not _usable(diagonal):
+    if not usable_source(diagonal):
         return None
     cache = DecentralizedCache(instance)
     cache._design = diagonal

@@ -52,6 +52,7 @@ import numpy as np
 from ..instances import node_width
 
 __all__ = ["INITS", "WARM_INITS", "AUTO_RADIUS", "Start", "StartSources", "build_start", "member_start",
+           "usable_source",
            "check_warm_settings", "delayed_gamma", "state_std"]
 
 #: The GRNN's initializations: the paper's random draw, a static design embedded (warm start), or
@@ -146,7 +147,8 @@ class Start:
         return _LABELS.get(self.init, "the random initialization")
 
 
-def _usable(design) -> bool:
+def usable_source(design) -> bool:
+    """Whether a static design can start a GRNN: usable, with a controller, and a stable closed loop."""
     from ..status import USABLE, is_stable
 
     return (design is not None and design.status in USABLE and design.controller is not None
@@ -215,7 +217,7 @@ def build_start(sources: StartSources | None, instance, settings, variant: str, 
             design, name, extras = source, "the given delayed design", {}
         else:
             design, name, extras = _source(sources, instance, init, variant, beta)
-        if not _usable(design):
+        if not usable_source(design):
             why = (getattr(design, "message", "") or getattr(design, "status", "")) if design is not None else ""
             reason = f"{name} gave no usable design" + (f" ({why})" if why else "")
         else:

@@ -106,7 +106,7 @@ def test_no_negative_zero_no_scientific_link_counts_and_every_dash_defined():
     paper = PAPER_TABLE1["grnn_fixed"][1.05]
     text = table1_markdown(_fixed([paper * (1 - 1e-5)] * 4, links=123456))
     fixed = _row(text, "GRNN-Fixed")
-    assert fixed[5] == "0.0 %" and "-0.0" not in text
+    assert fixed[5] == "0.0 %" and "-0.0" not in text and "−0.0" not in text
     assert fixed[7] == "123456 (123476)" and "e+" not in text
     assert "—" in text and "—: no value" in text
     assert "‖A‖=" not in text and "‖A‖ " not in text and "‖A‖₂ = 1.05" in text
@@ -116,7 +116,7 @@ def test_signed_drops_the_sign_of_a_value_that_rounds_to_zero():
     from compare.report.learning_report import _signed
 
     assert _signed(-0.00004, 4) == "0.0000" and _signed(-0.04, 1, " %") == "0.0 %"
-    assert _signed(-0.06, 1, " %") == "-0.1 %" and _signed(0.25, 2) == "+0.25"
+    assert _signed(-0.06, 1, " %") == "−0.1 %" and _signed(0.25, 2) == "+0.25"
 
 
 def test_bootstrap_interval_covers_the_median_and_is_reproducible():

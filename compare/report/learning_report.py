@@ -118,11 +118,12 @@ def _fmt(value, digits=3) -> str:
 
 
 def _signed(value: float, digits: int, unit: str = "") -> str:
-    """``value`` with its sign, ``digits`` decimals and ``unit``; a value that rounds to zero has no sign."""
+    """``value`` with its sign (a minus sign, as the rest of the page writes it), ``digits`` decimals and
+    ``unit``; a value that rounds to zero has no sign."""
     text = f"{value:+.{digits}f}"
     if float(text) == 0:
         text = f"{0:.{digits}f}"
-    return text + unit
+    return text.replace("-", "−") + unit
 
 
 def _links_text(value: float) -> str:

@@ -108,10 +108,6 @@ class _VariantBatch:
 
     def __call__(self, pairs):
         return grnn_batch([(inst, {**params, "variant": self.variant}) for inst, params in pairs])
-        self.variant = variant
-
-    def __call__(self, pairs):
-        return grnn_batch([(inst, {**params, "variant": self.variant}) for inst, params in pairs])
 
 
 #: Variants are refused at once above these many states. Above STRUCTURED_ABOVE states training

@@ -166,9 +166,9 @@ def test_the_delayed_start_by_variant(small):
 
 
 def test_a_batch_computes_each_start_once_per_instance(small, monkeypatch):
-    import sys
+    import importlib
 
-    sources = sys.modules["baselines.grnn"]  # where StartCache finds it (the name baselines.grnn is the function)
+    sources = importlib.import_module("baselines.grnn")  # where StartCache finds it (baselines.grnn the name is the function)
     calls = []
     real = sources.decentralized
     monkeypatch.setattr(sources, "decentralized", lambda inst, **kw: calls.append(inst.seed) or real(inst, **kw))

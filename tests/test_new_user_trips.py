@@ -312,10 +312,10 @@ def test_the_shipped_report_folders_pass_the_new_checks():
 def test_a_delayed_start_that_falls_back_says_the_chain_in_a_diverged_message(monkeypatch):
     from codesign import paper_instance
     from codesign.design import Design
-    import sys
+    import importlib
 
     from baselines import grnn
-    warm = sys.modules["baselines.grnn"]  # the module (baselines.grnn the name is the function)
+    warm = importlib.import_module("baselines.grnn")  # the module (baselines.grnn the name is the function)
 
     def no_design(self, instance, *args, **kwargs):
         return Design.failure("source", {}, "diverged", "no stabilizing gain found")

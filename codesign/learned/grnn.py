@@ -358,6 +358,7 @@ def grnn_batch(jobs, *, stack_size: int = 128, sources: StartSources | None = No
         ``stack_size`` models: ensemble members, variants, instances and the
         sparse variant's l1 stage all train side by side, then all refinements.
     stack_size : int
+        The most models one stack trains side by side.
     sources : StartSources, optional
         Where warm starts' static designs come from (the method layer's:
         ``baselines.grnn_batch`` passes them). None: a job whose ``init`` needs one

@@ -342,18 +342,17 @@ def _learned_sentence(learned, system, budgets) -> str | None:
     if len(verdicts) == 1:
         lead = f"On the best static graph {_within([x.budget for x in mine])}, {subject} {verdicts.pop()} the static gain"
         return _stated(f"{lead} on it: {join_words(values)}.", f"{lead} on it.")
-    parts = [f"within {x.budget:g} links it {_verdict(x.difference)} it ({v})" for x, v in zip(mine, values)]
-    return _stated(f"Against the static gain on the best static graph, {subject}: {'; '.join(parts)}.",
-                   f"Against the static gain on the best static graph, {subject}: "
-                   f"{'; '.join(f'within {x.budget:g} links it {_verdict(x.difference)} it' for x in mine)}.")
+    bare = [f"within {x.budget:g} links it {_verdict(x.difference)} it" for x in mine]
+    lead = f"Against the static gain on the best static graph, {subject}:"
+    return _stated(f"{lead} {'; '.join(f'{b} ({v})' for b, v in zip(bare, values))}.", f"{lead} {'; '.join(bare)}.")
 
 
 def graph_gap_sentences(records) -> list[str]:
     """The opening's three sentences where the records hold refits (:mod:`compare.report.answer`, rule (0'')).
 
     On the system with the most instances: GRNN-Sparse's graph gap and controller gap within
-    :data:`OPENING_BUDGETS` links, with intervals; which graphs the l1 paths pick (their graph gaps,
-    and their largest controller gap); and whether the trained GRNN on the best static graph beats
+    :data:`OPENING_BUDGETS` links, with intervals; which graphs the l1 paths pick (their graph gaps)
+    and their controller gaps; and whether the trained GRNN on the best static graph beats
     the static gain on it. Each at most :data:`~compare.report.names.MAX_WORDS` words; every
     number one the section's tables print.
     """

@@ -27,7 +27,7 @@ from compare.report.cost_links import aggregate, plot_cost_vs_links  # noqa: E40
 from compare.report.figures import legend_handles, plot_budget_fronts  # noqa: E402
 from compare.report.interactive import budget_fronts_figure, cost_links_figure  # noqa: E402
 from compare.report.statistics import budget_fronts  # noqa: E402
-from compare.report.styles import GRNN_KIND_COLOURS, METHOD_STYLES, label_styles, style_for  # noqa: E402
+from compare.report.styles import GRNN_KIND_COLOURS, METHOD_STYLES, label_styles, style_for, style_key  # noqa: E402
 from compare.run.records import Records, canonical_key  # noqa: E402
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
@@ -194,3 +194,13 @@ def test_the_shipped_learned_class_arms_are_styled_apart():
     assert len({s.colour for s in grnn.values()}) == len(grnn)
     handles = legend_handles(grnn, sorted(grnn))
     assert [h.get_label() for h in handles if h.get_label() in grnn] == sorted(grnn)
+
+
+def test_each_refit_class_is_its_own_kind_of_design():
+    """A refit's controller class and activation tell its arms apart (the topology report draws five)."""
+    kinds = [{"controller": c} for c in ("delayed", "instantaneous", "sls", "grnn")]
+    kinds.append({"controller": "grnn", "activation": "identity"})
+    keys = [style_key("refit", dict(k, graph="0-1")) for k in kinds]
+    assert len(set(keys)) == 5 and style_key("refit", {"controller": "sls", "graph": "1-2"}) == keys[2]
+    colours = {style_for("refit", k).colour for k in kinds}
+    assert len(colours) == 5

@@ -210,10 +210,14 @@ def style_key(method: str, params: Mapping | None = None) -> str:
 
     The activation of a GRNN (identity: a linear controller), its readout and warm start
     (:func:`grnn_kinds`: ``grnn_sparse_per_node_warm_diagonal``), the graph of an SLS
-    design and the information model of an exact-budget search make different kinds of
-    design; other hyperparameters (γ, β, steps) do not.
+    design, the information model of an exact-budget search and the controller class of a
+    refit (with its activation) make different kinds of design; other hyperparameters (γ, β,
+    steps, a refit's graph) do not.
     """
     params = params or {}
+    if method == "refit":
+        key = f"refit_{params.get('controller', 'delayed')}"
+        return f"{key}_linear" if params.get("activation") == "identity" else key
     if method.startswith("grnn"):
         key = f"{method}_linear" if params.get("activation") == "identity" else method
         return key + "".join(GRNN_KINDS[k][0] if k in GRNN_KINDS else f"_{k}" for k in grnn_kinds(method, params))

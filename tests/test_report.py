@@ -354,3 +354,44 @@ def test_the_answer_comes_before_the_contents_on_the_page(tmp_path):
 
     page = render_html("# Title\n\nThe answer, first.\n\n## Findings\n\ntext\n\n## More\n\nx\n", tmp_path, "Title")
     assert page.index("The answer, first.") < page.index('<nav class="toc">') < page.index('id="findings"')
+
+
+def test_a_method_without_a_usable_design_on_any_panel_is_named_once_in_the_legend_not_in_every_title():
+    import matplotlib.pyplot as plt
+
+    from compare.report.figures import NOWHERE_SUFFIX, plot_budget_fronts
+    from compare.report.statistics import budget_fronts
+    from compare.run.records import Records
+
+    rows = []
+    for a_norm in (0.995, 1.05):
+        for inst in INST:
+            inst = dict(inst, a_norm=a_norm)
+            rows += [_rec(inst, "m", 5, 1.2), _rec(inst, "lqr", 56, 1.0),
+                     _rec(inst, "never", 10, float("nan"), status="infeasible"),
+                     # no usable design on one panel only: named under that panel's title, as before
+                     _rec(inst, "sometimes", 10, 1.3 if a_norm < 1 else float("nan"),
+                          status="optimal" if a_norm < 1 else "infeasible")]
+    fig, axes = plot_budget_fronts(budget_fronts(Records.from_rows(rows)))
+    titles = {panel[2]: ax.get_title() for panel, ax in axes.items()}
+    assert not any("never" in t for t in titles.values())
+    assert "no usable design: sometimes" in titles[1.05] and "sometimes" not in titles[0.995]
+    names = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert f"never{NOWHERE_SUFFIX}" in names and "sometimes" in names and "m" in names
+    plt.close(fig)
+
+
+def test_what_the_figures_cannot_show_names_a_method_without_any_usable_design_once():
+    from compare.report.write import _missing_lines
+    from compare.run.records import Records
+
+    rows = [_rec(dict(inst, a_norm=a_norm), label, 10, cost, status=status)
+            for a_norm in (0.995, 1.05) for inst in INST
+            for label, cost, status in (("m", 1.2, "optimal"), ("never", float("nan"), "infeasible"))]
+    rows += [_rec(dict(INST[0], a_norm=1.1), "once", 10, float("nan"), status="infeasible"),
+             _rec(dict(INST[0], a_norm=1.1), "m", 10, 1.2)]
+    records = Records.from_rows(rows)
+    lines = [x for x in _missing_lines(records, aggregate(records), {}) if x.startswith("- ")]
+    assert lines == ["- never has no usable design on any of its 2 panels (infeasible 6); it is absent from the "
+                     "figures' panels.",
+                     "- once has no usable design on N = 8, ‖A‖₂ = 1.1 (infeasible 1); it is absent there."]

@@ -36,12 +36,24 @@ it is one a table of the page gives. The sentences are chosen by rules, in this 
     where it holds, its largest difference first and its smallest, and the budgets where
     the verdict differs. Then either how it holds panel by panel (where a panel's test can
     pass Holm's correction), or the other pairs against the same design that go the same way.
+    Where the panels are different systems (they differ in family or case: a chain beside a
+    platoon, :func:`different_systems`), only the pairs compared on panels of one kind are pooled.
+(c') **System by system.** Where the panels are different systems, a pair compared on several
+    kinds, and every pair where (c) pooled none: never a median over them, but at the budget of
+    the pair's largest difference on how many systems the same design costs more, that difference
+    with its system as the per-panel table prints it, where it changes across budgets on that
+    system and which systems differ ("GRNN-Sparse costs more than Sparse delayed K (l1) within 1
+    link per node on all 3 systems compared, most on chain, N = 20: +0.088 × LQR (1 instance);
+    there within 3 and 7 links per node and with any number: equal"). The first pair is chosen
+    as (c) chooses (none against, the same information model, the delayed comparisons first),
+    the next ones by their largest difference among pairs that share no design with one stated.
 (d) **Difficulty.** Beside the result, where its panels (each one system) differ by a
     factor of :data:`DIFFICULTY_RATIO` or more in what doing nothing (u = 0) costs over LQR:
     that cost on the easiest and hardest of them, and the result's gap on each.
 
-Rules (0), (0') or (0''), and (a) to (c) each add their sentences ((c) only where none of (0),
-(0'), (0'') and (b) did), (d) follows (c); the first :data:`MAX_SENTENCES` are kept.
+Rules (0), (0') or (0''), and (a) to (c') each add their sentences ((c) and (c') only where none
+of (0), (0'), (0'') and (b) did), (d) follows (c) or the first of (c'); the first
+:data:`MAX_SENTENCES` are kept.
 """
 
 from __future__ import annotations
@@ -55,7 +67,7 @@ from codesign.status import DIVERGED, FAILED
 
 from ..run.records import Records, as_records, canonical_key
 from .decomposition import decomposition_sentences
-from .findings import BOUND_LABEL, Comparison, Pooled, budgets_per_node, pooled_rows
+from .findings import BOUND_LABEL, PRACTICAL_MARGIN, Comparison, Pooled, budgets_per_node, pooled_rows
 from .ladder import ladder_lines
 from .graph_gaps import graph_gap_sentences
 from .names import MAX_WORDS, join_words, short_names, words
@@ -74,6 +86,8 @@ _NOTHING = "autonomous"
 _VERBS = {DIVERGED: ("diverges", "diverge"), FAILED: ("fails", "fail")}
 #: Spec keys that tell no two systems apart (:mod:`compare.report.ladder`'s rule).
 _NOT_SYSTEM = ("seed", "sha256")
+#: Spec keys whose text values name a kind of system: panels that differ in them are different systems.
+_KIND_KEYS = ("family", "case", "name")
 
 
 # --------------------------------------------------------------------------- wording
@@ -443,6 +457,169 @@ def also_sentence(rows_all: Sequence[Pooled], chosen: Sequence[Pooled], level: s
     return None
 
 
+# --------------------------------------------------------------------------- (c') the result, system by system
+
+
+def _kind(rs: Records) -> tuple:
+    """What kind of system a panel's instances are: the text values of their family and case (ladder's names)."""
+    return tuple(sorted({(k, str(i.spec[k])) for i in rs.instances for k in _KIND_KEYS if k in i.spec}))
+
+
+def different_systems(records, panels: Sequence[tuple]) -> bool:
+    """Whether ``panels`` are different systems, so that no median may pool them: they differ in family or case
+    (a chain beside a platoon, ieee39 beside wecc). The panels of one random family at several sizes or ‖A‖₂
+    are draws of one kind of system, which the Findings pool (docs/reports.md, "Pooling")."""
+    by_panel = as_records(records).by_panel
+    return len({_kind(by_panel[p]) for p in panels if p in by_panel}) > 1
+
+
+def _one_kind(records, panels: Sequence[tuple]) -> bool:
+    """Whether ``panels`` are all of one kind of system (:func:`different_systems` says they are not different)."""
+    return not different_systems(records, list(dict.fromkeys(panels)))
+
+
+def _cell_side(c) -> int:
+    """+1 / −1 where the first design costs more / less on the cell's system (a tested direction, or the median of
+    too few instances to test beyond the 0.1 % margin); 0 where they are equal, mixed or no clear difference."""
+    level = _level(c)
+    median = c.paired.median
+    if level in ("beats", "direction") or (level == "few" and math.isfinite(median)
+                                             and abs(median) >= PRACTICAL_MARGIN):
+        return _side(c)
+    return 0
+
+
+def _system_candidates(comparisons: Sequence[Comparison], flagged: set, per_node: bool) -> list[tuple]:
+    """Per pair: (its cells, the cell of its largest difference with a side, the cells against that one at its
+    budget, its order in the Findings); cells where rule (a) names a side as failing are left out."""
+    pairs: dict[tuple, list] = {}
+    for c in comparisons:
+        if (c.panel, c.a) not in flagged and (c.panel, c.b) not in flagged:
+            pairs.setdefault(_pair_key(c), []).append(c)
+    out = []
+    for order, cells in enumerate(pairs.values()):
+        sided = [c for c in cells if _cell_side(c)]
+        if not sided:
+            continue
+        lead = max(sided, key=lambda c: abs(c.paired.median))
+        tier = lead.budget_tier(per_node)
+        against = [c for c in cells if c.budget_tier(per_node) == tier and _cell_side(c) == -_cell_side(lead)]
+        out.append((cells, lead, against, order))
+    return out
+
+
+def _system_list(panels: Sequence[tuple], names: Mapping) -> str:
+    """"swing_grid, N = 25 and 100" (one family at several sizes), "chain, N = 20 and platoon, N = 20", "3 others"."""
+    panels = list(panels)
+    if len(panels) > 1 and len({p[0] for p in panels}) == 1 and all(names[p] == f"{p[0]}, N = {p[1]}"
+                                                                     for p in panels):
+        return f"{panels[0][0]}, N = {join_words([str(p[1]) for p in panels])}"
+    return join_words([names[p] for p in panels]) if len(panels) <= 2 else f"{len(panels)} others"
+
+
+def _instances_note(c) -> str:
+    """" (1 instance)", " (3 instances)": how few instances a median untested rests on; "" where it has an interval."""
+    n = c.paired.instances
+    return f" ({n} instance{'' if n == 1 else 's'})" if c.too_few else ""
+
+
+def system_sentence(cells: Sequence[Comparison], lead: Comparison, short: Mapping, names: Mapping,
+                    per_node: bool) -> str | None:
+    """One pair on panels that are different systems, no median pooled over them: at the budget of its largest
+    difference, on how many systems the same design costs more, that difference with its system, then where it
+    changes on that system across budgets and where the other systems differ; None where even the first clause
+    is over :data:`MAX_WORDS` words.
+
+    "GRNN-Sparse costs more than Sparse delayed K (l1) within 1 link per node on all 3 systems compared, most on
+    chain, N = 20: +0.088 × LQR (1 instance); there within 3 and 7 links per node and with any number: equal."
+    """
+    side = _cell_side(lead)
+    winner, loser = _names(lead.a, lead.b, short, side)
+    tier = lead.budget_tier(per_node)
+    at = [c for c in cells if c.budget_tier(per_node) == tier]
+    same = [c for c in at if _cell_side(c) == side]
+    value = f"{_signed(lead, side)} × LQR{_instances_note(lead)}"
+    across = "across information models, " if lead.relation != "same" else ""
+    one = len({c.panel for c in cells}) == 1
+    there = [c for c in cells if c.panel == lead.panel and c is not lead]
+    if one:  # one system: the budgets where it is the same, as the table prints it, named with the largest
+        alike = [c for c in there if _cell_side(c) == side and _signed(c, side) == _signed(lead, side)]
+        there = [c for c in there if c not in alike]
+        tiers = _tiers_phrase(sorted([c.budget_tier(per_node) for c in [lead, *alike]],
+                                     key=lambda t: math.inf if t is None else t), per_node)
+        text = f"On {names[lead.panel]}, {across}{loser} costs more than {winner} {tiers}: {value}"
+    else:
+        every = "both" if len(at) == 2 else f"all {len(at)}"
+        count = every if len(same) == len(at) else f"{len(same)} of {len(at)}"
+        text = (f"{across}{loser} costs more than {winner} {_tier(tier, per_node)} on {count} systems compared, "
+                f"most on {names[lead.panel]}: {value}")
+    text = text[0].upper() + text[1:]
+    if words(text) > MAX_WORDS:
+        return None
+
+    def word(c) -> str:
+        """"" where the cell goes the lead's way, else what it says instead."""
+        s, level = _cell_side(c), _level(c)
+        if s:
+            return "" if s == side else "the other way"
+        return {"equal": "equal", "mixed": "mixed"}.get(level, "no clear difference")
+
+    clauses = []
+    # across budgets on the system of the largest difference: where the verdict changes, and the smallest one
+    changes: dict[str, list] = {}
+    for c in there:
+        if word(c):
+            changes.setdefault(word(c), []).append(c)
+    where = "" if one else "there "
+    for w, cs in changes.items():
+        tiers = _tiers_phrase([c.budget_tier(per_node) for c in cs], per_node)
+        shown = f" ({_signed(cs[0], side)})" if w == "the other way" and len(cs) == 1 else ""
+        clauses.append(f"{where}{tiers}: {w}{shown}")
+    kept = [c for c in there if _cell_side(c) == side]
+    if kept:
+        small = min(kept, key=lambda c: abs(c.paired.median))
+        if _signed(small, side) != _signed(lead, side):
+            clauses.append(f"{where}{_tier(small.budget_tier(per_node), per_node)}: {_signed(small, side)}")
+    # the other systems at that budget that do not go the same way
+    others: dict[str, list] = {}
+    for c in at:
+        if c not in same:
+            others.setdefault(word(c), []).append(c)
+    for w, cs in others.items():
+        shown = f" ({_signed(cs[0], side)})" if w == "the other way" and len(cs) == 1 else ""
+        clauses.append(f"{w} on {_system_list([c.panel for c in cs], names)}{shown}")
+    for clause in clauses:  # in this order, while the sentence stays short enough
+        longer = f"{text}; {clause}"
+        if words(longer) <= MAX_WORDS:
+            text = longer
+    return text + "."
+
+
+def system_sentences(records, comparisons: Sequence[Comparison], flagged: set, short: Mapping, names: Mapping,
+                     per_node: bool) -> list[str]:
+    """Rule (c'), where the panels are different systems: the pair of rule (c)'s preference (no system the other
+    way, the same information model, the delayed comparisons first), then the largest differences of pairs that
+    share no design with a pair stated, each system by system (:func:`system_sentence`), with rule (d) after the
+    first."""
+    candidates = _system_candidates(comparisons, flagged, per_node)
+    if not candidates:
+        return []
+    size = lambda item: -abs(item[1].paired.median)  # noqa: E731
+    first = min(candidates, key=lambda item: (bool(item[2]), item[1].relation != "same",
+                                              _group_rank(item[1].group), size(item), item[3]))
+    # (rule (d) reads the pooled rows' cells only: what doing nothing costs and the gap, system by system)
+    out = [system_sentence(first[0], first[1], short, names, per_node),
+           difficulty_sentence(records, pooled_rows(first[0]), short, names, per_node)]
+    stated = {first[1].a, first[1].b}
+    for cells, lead, against, order in sorted(candidates, key=lambda item: (bool(item[2]), size(item), item[3])):
+        if len([s for s in out if s]) >= MAX_SENTENCES:
+            break
+        if lead.a not in stated and lead.b not in stated:
+            out.append(system_sentence(cells, lead, short, names, per_node))
+            stated |= {lead.a, lead.b}
+    return [s for s in out if s]
+
+
 # --------------------------------------------------------------------------- (d) difficulty
 
 
@@ -539,6 +716,11 @@ def answer_lines(records, comparisons: Sequence[Comparison], *, meta=None, membe
                 if not any((c.panel, x) in flagged for c in r.cells for x in (c.a, c.b))]
         short = comparison_short_names(comparisons)
         per_node = budgets_per_node(comparisons)
+        # no median over systems that differ: a pair compared on panels of several kinds is no pooled result
+        different = different_systems(records, list(cell_names))
+        if different:
+            mixed = {_pair_key(r) for r in rows if not _one_kind(records, [c.panel for c in r.cells])}
+            rows = [r for r in rows if _pair_key(r) not in mixed]
         chosen = _result(rows, flagged, short)
         if chosen is not None:
             mine, level, side = chosen
@@ -546,6 +728,10 @@ def answer_lines(records, comparisons: Sequence[Comparison], *, meta=None, membe
             sentences += [s for s in (per_panel_sentence(mine, level, side, cell_names, per_node)
                                       or also_sentence(rows, mine, level, side, short, per_node),
                                       difficulty_sentence(records, mine, short, cell_names, per_node)) if s]
+        if different:  # the pairs on different systems, one system by one (all of them where nothing pooled)
+            pooled_pairs = {_pair_key(r) for r in rows} if chosen is not None else set()
+            sentences += system_sentences(records, [c for c in comparisons if _pair_key(c) not in pooled_pairs],
+                                          flagged, short, cell_names, per_node)
     sentences = sentences[:MAX_SENTENCES]
     if ladder_details:  # the ladder's verdict, the other sentences, then its table
         return sentences + [""] + ladder_details + [""]

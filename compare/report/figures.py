@@ -42,7 +42,8 @@ __all__ = ["LINESTYLES", "OFF_SCALE", "FLOOR", "excess", "excess_axis", "panel_g
            "legend_handles", "finish_legend", "draw_boundary", "boundary_handles", "plot_budget_fronts",
            "label_styles", "method_gid", "front_gid", "draw_front_line", "drawn_styles", "axis_floor", "panel_figure",
            "y_limits", "shared_y", "cost_range", "cost_ticks", "links_ticks", "links_axis", "grid_cells",
-           "panel_order", "per_node_axis", "bands_drawn", "title_notes", "mark_above", "bound_handles",
+           "panel_order", "per_node_axis", "bands_drawn", "title_notes", "nowhere_usable", "NOWHERE_SUFFIX",
+           "mark_above", "bound_handles",
            "PAGE_PX", "SCREEN_PX", "DPI", "MIN_POINTS", "MAX_WIDTH", "MAX_COLUMNS", "MAX_BANDS", "BUDGET_PAD",
            "COST_PAD", "OFF_SCALE_GID"]
 
@@ -461,12 +462,17 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
     bands = bands_drawn(fronts)
 
     limits = cost_range(_shown_costs(fronts, bounds), BUDGET_PAD) if shared_y(panels) else None
+    nowhere = nowhere_usable(fronts)
     for panel in panels:
         _draw_panel(axes[panel], panel, [f for f in fronts if f.panel == panel], styles, limits=limits,
-                    per_node=per_node, boundaries=boundaries, bounds=bounds, bands=bands)
+                    per_node=per_node, boundaries=boundaries, bounds=bounds, bands=bands, nowhere=nowhere)
     if own:
         bound_text = next(iter(bounds.values()))[1] if bounds else ""
-        finish_legend(fig, legend_handles(styles, labels) + bound_handles(axes.values(), bound_text)
+        handles = legend_handles(styles, labels)
+        for handle in handles:  # said once, in the legend, not under every panel's title
+            if handle.get_label() in nowhere:
+                handle.set_label(f"{handle.get_label()}{NOWHERE_SUFFIX}")
+        finish_legend(fig, handles + bound_handles(axes.values(), bound_text)
                       + boundary_handles(axes.values()),
                       title="median over instances; band 25–75 %" if bands else
                       f"median over instances (no 25–75 % bands:\nmore than {MAX_BANDS} methods on a panel)")
@@ -474,11 +480,12 @@ def plot_budget_fronts(fronts, *, axes=None, styles: dict | None = None, boundar
 
 
 def _draw_panel(ax, panel: tuple, fronts, styles: dict, *, limits, per_node: bool, boundaries: dict | None,
-                bounds: dict | None, bands: bool = True) -> None:
+                bounds: dict | None, bands: bool = True, nowhere: frozenset = frozenset()) -> None:
     """One panel: each front with its band and start, its axes, a title that names what is not drawn, the bound
     and the QI boundary. A panel none of whose fronts has a finite median stays empty.
 
-    ``limits`` is the (bottom, top) every panel shares, if they share one.
+    ``limits`` is the (bottom, top) every panel shares, if they share one; ``nowhere`` the labels without a usable
+    design on any panel (:func:`nowhere_usable`), which the legend names once instead of every title.
     """
     scale = panel[1] if per_node and panel[1] else 1.0  # links per node; 0: a family without n
     right = max(float(f.budgets[-1]) for f in fronts) / scale
@@ -487,7 +494,7 @@ def _draw_panel(ax, panel: tuple, fronts, styles: dict, *, limits, per_node: boo
     bottom, top = limits or cost_range(_shown_costs(fronts, bounds), BUDGET_PAD)
     _finish_front_axes(ax, bottom, top, right, per_node)
     above = [_draw_front(ax, f, _style(styles, f.label), bottom, right, scale, bands) for f in fronts]
-    notes = title_notes(fronts, [note for note in above if note is not None])
+    notes = title_notes(fronts, [note for note in above if note is not None], nowhere=nowhere)
     ax.set_title("\n".join([panel_heading(panel, max(f.instances for f in fronts))] + notes),
                  fontsize=NOTE_POINTS if notes else TITLE_POINTS, pad=8)
     if bounds and panel in bounds:
@@ -534,11 +541,25 @@ def _draw_front(ax, front, s: Style, bottom: float, right: float, scale: float, 
     return None
 
 
-def title_notes(fronts, above: list[str], width: int = 55) -> list[str]:
+#: What the legend adds to a method without a usable design on any panel of a figure (:func:`nowhere_usable`).
+NOWHERE_SUFFIX = " (no usable design)"
+
+
+def nowhere_usable(fronts) -> frozenset:
+    """The labels whose fronts have no usable design on any panel, where a figure has several panels: the legend
+    says so once (:data:`NOWHERE_SUFFIX`), not every panel's title (:func:`title_notes`)."""
+    if len({f.panel for f in fronts}) < 2:
+        return frozenset()
+    labels = {f.label for f in fronts}
+    return frozenset(x for x in labels if all(f.covered == 0 for f in fronts if f.label == x))
+
+
+def title_notes(fronts, above: list[str], width: int = 55, nowhere=frozenset()) -> list[str]:
     """The notes under a panel's title: the fronts above the axis (``above``, as "label (cost)"), and
-    the methods with designs on some instances only or on none; the interactive panels carry the same."""
+    the methods with designs on some instances only or on none (but those in ``nowhere``, without a usable
+    design on any panel, which the legend names once); the interactive panels carry the same."""
     partial = [f"{f.label} ({f.covered} of {f.instances})" for f in fronts if 0 < f.covered < f.instances]
-    missing = [f.label for f in fronts if f.covered == 0]
+    missing = [f.label for f in fronts if f.covered == 0 and f.label not in nowhere]
     return [textwrap.fill(f"{head}: " + ", ".join(items), width)
             for head, items in (("above the axis", above), ("designs on some instances only", partial),
                                 ("no usable design", missing))

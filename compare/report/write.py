@@ -150,8 +150,18 @@ def _save(out: Path, files: dict, drawn: dict):
 def _missing_lines(records: Records, points: list[Point], boundaries: dict) -> list[str]:
     """What the figures cannot show: methods with no usable design on a panel, paths that stop short."""
     notes = []
-    for (panel, label), rs in sorted(records.by_panel_label.items()):
-        if not any(r.ok for r in rs):
+    empty = {key: rs for key, rs in records.by_panel_label.items() if not any(r.ok for r in rs)}
+    # a method without a usable design on any of its panels (SLS on graphs it cannot design on): said once
+    nowhere = {label for label, rs in records.by_label.items()
+               if len({r.instance.panel for r in rs}) > 1 and not any(r.ok for r in rs)}
+    for label in sorted(nowhere):
+        rs = records.by_label[label]
+        statuses = ", ".join(f"{s} {k}" for s, k in sorted(Counter(r.status for r in rs).items()))
+        panels = len({r.instance.panel for r in rs})
+        notes.append(f"{label} has no usable design on any of its {panels} panels ({statuses}); it is absent from "
+                     "the figures' panels.")
+    for (panel, label), rs in sorted(empty.items()):
+        if label not in nowhere:
             statuses = ", ".join(f"{s} {k}" for s, k in sorted(Counter(r.status for r in rs).items()))
             notes.append(f"{label} has no usable design on {panel_title(panel)} ({statuses}); it is absent there.")
     given = {panel: float(np.median([i.comm_links for i in rs.instances if i.comm_links is not None] or [np.nan]))

@@ -5,7 +5,8 @@ Measured on each shipped ``reports/*/report.md`` (issue 61):
 - the opening (between the title and the first section) answers in at most three sentences of at most
   40 words each, and holds at most 150 words with anything that follows them there (the budget
   ladder's caption); every measured number in it (a decimal, a percentage, a multiple of LQR) is one the
-  rest of the page gives, to the precision the opening states it;
+  rest of the page gives, to the precision the opening states it; its sentences that state a difference
+  in units of LQR's cost come largest first;
 - the Findings hold a table, no bullet over 60 words, and at most 500 words of prose (everything but
   the tables, the images and the markers the HTML page reads);
 - no text a user reads tells the report's author what to do, and no number prints as a signed zero.
@@ -113,6 +114,19 @@ def test_every_number_in_the_opening_is_on_the_page(report):
         if abs(round(value, decimals)) not in candidates:
             missing.append(m.group(0))
     assert not missing, f"{name}: numbers of the opening found nowhere else on the page: {missing}"
+
+
+#: The difference a sentence leads with, signed, in units of LQR's cost ("+0.81 × LQR", "+0.069 [+0.048, +0.083] ×
+#: LQR"); a cost ("about 2,877 × LQR", rule 1's failures) has no sign and is no difference.
+_DIFFERENCE = re.compile(r"[+−-](\d+\.\d+)(?: \[[^\]]*\])? × LQR")
+
+
+def test_the_opening_states_the_largest_effect_first(report):
+    """Issue 61: of the opening's sentences that state a difference × LQR, the one with the largest comes first."""
+    name, text = report
+    sentences = _opening_sentences(_sections(text)[""])
+    sizes = [float(m.group(1)) for s in sentences if (m := _DIFFERENCE.search(s))]
+    assert sizes == sorted(sizes, reverse=True), f"{name}: differences stated in the order {sizes}"
 
 
 def test_findings_are_a_table_with_short_bullets_and_little_prose(report):

@@ -44,16 +44,22 @@ it is one a table of the page gives. The sentences are chosen by rules, in this 
     with its system as the per-panel table prints it, where it changes across budgets on that
     system and which systems differ ("GRNN-Sparse costs more than Sparse delayed K (l1) within 1
     link per node on all 3 systems compared, most on chain, N = 20: +0.088 × LQR (1 instance);
-    there within 3 and 7 links per node and with any number: equal"). The first pair is chosen
-    as (c) chooses (none against, the same information model, the delayed comparisons first),
-    the next ones by their largest difference among pairs that share no design with one stated.
+    there within 3 and 7 links per node and with any number: equal"). One pair is always stated,
+    chosen as (c) chooses (none against, the same information model, the delayed comparisons
+    first), the next ones by their largest difference among pairs that share no design with one
+    stated.
 (d) **Difficulty.** Beside the result, where its panels (each one system) differ by a
     factor of :data:`DIFFICULTY_RATIO` or more in what doing nothing (u = 0) costs over LQR:
     that cost on the easiest and hardest of them, and the result's gap on each.
 
 Rules (0), (0') or (0''), and (a) to (c') each add their sentences ((c) and (c') only where none
-of (0), (0'), (0'') and (b) did), (d) follows (c) or the first of (c'); the first
-:data:`MAX_SENTENCES` are kept.
+of (0), (0'), (0'') and (b) did), (d) follows (c) or the pair (c') always states; the first
+:data:`MAX_SENTENCES` are kept. The sentences kept of (c) and (c') are then stated largest effect
+first (issue 61): each pair's, with the sentences that follow it (its panel by panel or "also"
+sentence, its difficulty), in order of the largest difference the pair's sentence states (its
+median's size in units of LQR's cost), pairs of equal size in the rules' order. So a preferred
+pair (the same information model, the delayed comparisons) is always said, but never ahead of a
+larger effect. Failures (a) still come first, and (0), (0'), (0'') and (b) keep their own order.
 """
 
 from __future__ import annotations
@@ -596,11 +602,12 @@ def system_sentence(cells: Sequence[Comparison], lead: Comparison, short: Mappin
 
 
 def system_sentences(records, comparisons: Sequence[Comparison], flagged: set, short: Mapping, names: Mapping,
-                     per_node: bool) -> list[str]:
+                     per_node: bool) -> list[tuple[float, list[str]]]:
     """Rule (c'), where the panels are different systems: the pair of rule (c)'s preference (no system the other
     way, the same information model, the delayed comparisons first), then the largest differences of pairs that
     share no design with a pair stated, each system by system (:func:`system_sentence`), with rule (d) after the
-    first."""
+    preferred pair's; as (the size of the pair's largest difference, its sentences) in the order chosen, which
+    the answer states largest first (:func:`_largest_first`)."""
     candidates = _system_candidates(comparisons, flagged, per_node)
     if not candidates:
         return []
@@ -608,16 +615,33 @@ def system_sentences(records, comparisons: Sequence[Comparison], flagged: set, s
     first = min(candidates, key=lambda item: (bool(item[2]), item[1].relation != "same",
                                               _group_rank(item[1].group), size(item), item[3]))
     # (rule (d) reads the pooled rows' cells only: what doing nothing costs and the gap, system by system)
-    out = [system_sentence(first[0], first[1], short, names, per_node),
-           difficulty_sentence(records, pooled_rows(first[0]), short, names, per_node)]
+    out = [(_size(first[1]), [s for s in (system_sentence(first[0], first[1], short, names, per_node),
+                                          difficulty_sentence(records, pooled_rows(first[0]), short, names,
+                                                              per_node)) if s])]
     stated = {first[1].a, first[1].b}
     for cells, lead, against, order in sorted(candidates, key=lambda item: (bool(item[2]), size(item), item[3])):
-        if len([s for s in out if s]) >= MAX_SENTENCES:
+        if sum(len(b) for _, b in out) >= MAX_SENTENCES:
             break
         if lead.a not in stated and lead.b not in stated:
-            out.append(system_sentence(cells, lead, short, names, per_node))
+            sentence = system_sentence(cells, lead, short, names, per_node)
+            out.append((_size(lead), [sentence] if sentence else []))
             stated |= {lead.a, lead.b}
-    return [s for s in out if s]
+    return [(s, b) for s, b in out if b]
+
+
+# --------------------------------------------------------------------------- the largest effect first
+
+
+def _size(x) -> float:
+    """The size of the difference a sentence states of a pooled row or a cell: |median| in units of LQR's cost."""
+    median = x.paired.median
+    return abs(median) if math.isfinite(median) else 0.0
+
+
+def _largest_first(blocks: Sequence[tuple[float, list[str]]]) -> list[tuple[float, list[str]]]:
+    """Blocks of sentences, each a pair's statement with what follows it (rule (d) after its result), in order of
+    the size of the difference the pair's statement leads with, largest first; equal sizes in the rules' order."""
+    return sorted(blocks, key=lambda block: -block[0])
 
 
 # --------------------------------------------------------------------------- (d) difficulty
@@ -722,16 +746,26 @@ def answer_lines(records, comparisons: Sequence[Comparison], *, meta=None, membe
             mixed = {_pair_key(r) for r in rows if not _one_kind(records, [c.panel for c in r.cells])}
             rows = [r for r in rows if _pair_key(r) not in mixed]
         chosen = _result(rows, flagged, short)
+        blocks: list[tuple[float, list[str]]] = []  # (the size of a pair's largest difference, its sentences)
         if chosen is not None:
             mine, level, side = chosen
-            sentences.append(result_sentence(mine, level, side, short, per_node, len(cell_names)))
-            sentences += [s for s in (per_panel_sentence(mine, level, side, cell_names, per_node)
-                                      or also_sentence(rows, mine, level, side, short, per_node),
-                                      difficulty_sentence(records, mine, short, cell_names, per_node)) if s]
+            lead = [r for r in mine if _level(r) == level and _side(r) == side]
+            blocks.append((max(_size(r) for r in lead),
+                           [s for s in (result_sentence(mine, level, side, short, per_node, len(cell_names)),
+                                        per_panel_sentence(mine, level, side, cell_names, per_node)
+                                        or also_sentence(rows, mine, level, side, short, per_node),
+                                        difficulty_sentence(records, mine, short, cell_names, per_node)) if s]))
         if different:  # the pairs on different systems, one system by one (all of them where nothing pooled)
             pooled_pairs = {_pair_key(r) for r in rows} if chosen is not None else set()
-            sentences += system_sentences(records, [c for c in comparisons if _pair_key(c) not in pooled_pairs],
-                                          flagged, short, cell_names, per_node)
+            blocks += system_sentences(records, [c for c in comparisons if _pair_key(c) not in pooled_pairs],
+                                       flagged, short, cell_names, per_node)
+        # the rules choose what is said (the first sentences in their order); it is said largest effect first
+        room, kept = MAX_SENTENCES - len(sentences), []
+        for size, block in blocks:
+            block = block[:room - sum(len(b) for _, b in kept)]
+            if block:
+                kept.append((size, block))
+        sentences += [s for _, block in _largest_first(kept) for s in block]
     sentences = sentences[:MAX_SENTENCES]
     if ladder_details:  # the ladder's verdict, the other sentences, then its table
         return sentences + [""] + ladder_details + [""]

@@ -206,6 +206,11 @@ def _psd_sqrt(M: np.ndarray) -> np.ndarray:
     return (V * np.sqrt(np.clip(w, 0.0, None))) @ V.T
 
 
+#: SCS's tolerances and iteration limit where it stands in for Clarabel (a singular x0_cov).
+SCS_EPS = 1e-9
+SCS_MAX_ITERS = 100_000
+
+
 def _variable_count(instance, dist, T, *, speed, act_delay, fir) -> int:
     """Allowed entries of the maps X[1..T] (X[T] = 0 with ``fir``) and U[0..T-1]: the QP's variables."""
     pairs = np.sort(dist[np.ix_(instance.state_nodes, instance.state_nodes)].ravel())
@@ -246,23 +251,42 @@ def _solve_qp(instance, dist, T, *, speed, act_delay, fir):
 
     # Objective weights per block, normalized by trace(P) for solver scaling.
     scale = instance.trace_P
-    kQ = sp.kron(eye_n, sp.csr_matrix(instance.Q))
-    kR = sp.kron(eye_n, sp.csr_matrix(instance.R))
-    last = sp.csr_matrix((nn, nn)) if fir else sp.kron(eye_n, sp.csr_matrix(instance.P))
-    H = sp.block_diag([kQ] * (T - 1) + [last] + [kR] * T, format="csc")[:, keep]
-    H = (H[keep, :] / scale).tocsc()
-    H = (H + H.T) / 2
-
     z = cp.Variable(int(keep.sum()))
-    objective = cp.Minimize(cp.quad_form(z, cp.psd_wrap(H)))
+    if instance.x0_factor is None:
+        kQ = sp.kron(eye_n, sp.csr_matrix(instance.Q))
+        kR = sp.kron(eye_n, sp.csr_matrix(instance.R))
+        last = sp.csr_matrix((nn, nn)) if fir else sp.kron(eye_n, sp.csr_matrix(instance.P))
+        H = sp.block_diag([kQ] * (T - 1) + [last] + [kR] * T, format="csc")[:, keep]
+        H = (H[keep, :] / scale).tocsc()
+        H = (H + H.T) / 2
+        objective = cp.Minimize(cp.quad_form(z, cp.psd_wrap(H)))
+    else:
+        # x(0) = F z: a map M costs ‖W^½ M F‖², vec(W^½ M F) = (F' ⊗ W^½) vec(M).
+        Ft = sp.csr_matrix(np.asarray(instance.x0_factor).T)
+        roots = {key: sp.kron(Ft, sp.csr_matrix(_psd_sqrt(W))) for key, W in
+                 (("Q", instance.Q), ("R", instance.R), ("P", instance.P))}
+        last = sp.csr_matrix((roots["P"].shape[0], nn)) if fir else roots["P"]
+        L = sp.block_diag([roots["Q"]] * (T - 1) + [last] + [roots["R"]] * T, format="csc")[:, keep]
+        objective = cp.Minimize(cp.sum_squares((L / np.sqrt(scale)) @ z))
     problem = cp.Problem(objective, [G @ z == b])
     info = {"variables": int(keep.sum()), "constraints": int(G.shape[0])}
     try:
         # The SciPy canonicalization backend compiles one big sparse product fastest.
         problem.solve(solver=cp.CLARABEL, canon_backend=cp.SCIPY_CANON_BACKEND)
     except cp.error.SolverError as exc:
-        info.update(solver_status=cp.SOLVER_ERROR, error=str(exc))
-        return None, None, info
+        if instance.x0_cov is None:
+            info.update(solver_status=cp.SOLVER_ERROR, error=str(exc))
+            return None, None, info
+        # A singular Σ₀ leaves the responses on the directions it does not reach free, and Clarabel
+        # stops at its first step with a numerical error there (a rank-2 Σ₀ on the paper family at
+        # N = 6); SCS solves the same QP (25 iterations there).
+        info["solver"] = f"SCS (Clarabel: {exc})"
+        try:
+            problem.solve(solver=cp.SCS, canon_backend=cp.SCIPY_CANON_BACKEND, eps_abs=SCS_EPS, eps_rel=SCS_EPS,
+                          max_iters=SCS_MAX_ITERS)
+        except cp.error.SolverError as exc:
+            info.update(solver_status=cp.SOLVER_ERROR, error=str(exc))
+            return None, None, info
     info["solver_status"] = problem.status
     stats = problem.solver_stats
     info["solve_seconds"] = float(stats.solve_time) if stats and stats.solve_time is not None else float("nan")
@@ -271,7 +295,8 @@ def _solve_qp(instance, dist, T, *, speed, act_delay, fir):
         return None, None, info
     value = np.zeros(keep.size)
     value[keep] = z.value
-    info["objective"] = float(problem.value) + float(np.trace(instance.Q)) / scale
+    start = np.trace(instance.Q) if instance.x0_cov is None else np.sum(instance.Q * instance.x0_cov)
+    info["objective"] = float(problem.value) + float(start) / scale
     info["residual"] = float(np.max(np.abs(G @ z.value - b))) if b.size else 0.0
     X = np.empty((T + 1, n, n))
     X[0] = np.eye(n)
@@ -287,6 +312,8 @@ def _realized_objective(instance, controller, T: int) -> float:
     there it only charges what an inexact realization leaves at F.
     """
     phi_x, phi_u = controller.closed_loop_responses(instance, steps=T)
+    if instance.x0_factor is not None:  # x(0) = F z: the maps from z
+        phi_x, phi_u = phi_x @ instance.x0_factor, phi_u @ instance.x0_factor
     total = np.einsum("tij,ik,tkj->", phi_x[:T], instance.Q, phi_x[:T])
     total += np.einsum("tij,ik,tkj->", phi_u, instance.R, phi_u)
     total += np.einsum("ij,ik,kj->", phi_x[T], instance.P, phi_x[T])

@@ -100,7 +100,7 @@ from codesign.status import DIVERGED, INACCURATE, OPTIMAL, USABLE
 
 from ._sparse import GRAD_RTOL, DecentralizedCache, check_gammas, pattern_starts
 from .sparse_admm import ADMM_GAMMAS
-from .stabilizing import Minimum, is_stable, local_starts, search, unstable_note
+from .stabilizing import Minimum, horizon_free_gain, is_stable, local_starts, search, unstable_note
 
 __all__ = [
     "sparse_delayed",
@@ -308,10 +308,11 @@ def delayed_closed_loop(instance, K_local, K_delayed) -> np.ndarray:
 
 
 def _responses(instance, local, K_delayed):
-    """Blocks ``Φ_{t−1}`` for t = 0..T+1 of ``Φ_{t+1} = F Φ_t + H Φ_{t−1}`` (stacked, shape (T+2, n, n)).
+    """Blocks ``Φ_{t−1}`` for t = 0..T+1 of ``Φ_{t+1} = F Φ_t + H Φ_{t−1}`` (stacked, shape (T+2, n, r)).
 
     ``local`` is diag(K_local) (a vector) on one-state-one-input nodes, else the
-    block-diagonal (m, n) K_local.
+    block-diagonal (m, n) K_local. ``Φ_0`` is the identity (r = n), or the factor F
+    of the initial-state covariance Σ₀ = F F' (n × r) where the instance sets one.
     """
     n, T = instance.n, instance.horizon
     if local.ndim == 1:
@@ -320,11 +321,13 @@ def _responses(instance, local, K_delayed):
         F = instance.A + instance.B @ local
     H = instance.B @ K_delayed
     HF = np.hstack([H, F])
-    Y = np.zeros(((T + 2) * n, n))  # block k is Φ_{k−1}: [Φ_{t−1}; Φ_t] is contiguous
-    Y[n:2 * n] = np.eye(n)
+    start = np.eye(n) if instance.x0_factor is None else instance.x0_factor
+    r = start.shape[1]
+    Y = np.zeros(((T + 2) * n, r))  # block k is Φ_{k−1}: [Φ_{t−1}; Φ_t] is contiguous
+    Y[n:2 * n] = start
     for t in range(T):
         np.matmul(HF, Y[t * n:(t + 2) * n], out=Y[(t + 2) * n:(t + 3) * n])
-    return Y.reshape(T + 2, n, n), F, H
+    return Y.reshape(T + 2, n, r), F, H
 
 
 def _cost_and_grad(instance, local, K_delayed, *, grad: bool = True):
@@ -351,19 +354,19 @@ def _cost_and_grad(instance, local, K_delayed, *, grad: bool = True):
         # Costates λ_t = ∂J/∂Φ_t: λ_T = 2 P Φ_T and, with g_t = ∂J/∂U_t = 2 R U_t + B'λ_{t+1},
         # λ_t = 2 Q Φ_t + A'λ_{t+1} + K_l' g_t + K_d' g_{t+1}
         #     = [2 Q Φ_t + 2 K_l' R U_t + 2 K_d' R U_{t+1}] + F' λ_{t+1} + H' λ_{t+2}   (U_T = 0, λ_{T+1} = 0),
-        # with F = A + B K_l and H = B K_d (n × n; K_l, K_d and g_t are m × n, Φ_t and λ_t n × n).
-        n, m = instance.n, U.shape[1]
+        # with F = A + B K_l and H = B K_d (n × n; K_l and K_d m × n, g_t m × r, Φ_t and λ_t n × r).
+        n, m, r = instance.n, U.shape[1], U.shape[2]
         RU2 = 2.0 * RU
         d = 2.0 * QX + (local[:, None] * RU2 if scalar else local.T @ RU2)  # K_l diagonal: K_l' = K_l
         d[:-1] += K_delayed.T @ RU2[1:]
-        L = np.zeros(((T + 2) * n, n))  # block t is λ_t
+        L = np.zeros(((T + 2) * n, r))  # block t is λ_t
         L[T * n:(T + 1) * n] = 2.0 * PXT
         FtHt = np.hstack([F.T, H.T])
         for t in range(T - 1, -1, -1):
             block = L[t * n:(t + 1) * n]
             np.matmul(FtHt, L[(t + 1) * n:(t + 3) * n], out=block)
             block += d[t]
-        lam = L.reshape(T + 2, n, n)
+        lam = L.reshape(T + 2, n, r)
         G = RU2 + instance.B.T @ lam[1:T + 1]  # g_t, t = 0..T−1, (T, m, n)
         # ∂J/∂K_l = Σ_t g_t Φ_t' (diagonal entries), ∂J/∂K_d = Σ_t g_t Φ_{t−1}' (Φ_{−1} = 0).
         if scalar:
@@ -796,6 +799,16 @@ def stabilizing_delayed(instance, K_local, K_delayed, free, *, decentral: Decent
         for name, K in local_starts(instance):
             yield name, (nodes.local_matrix(nodes.local(K)), zero)
 
+    if instance.x0_cov is not None:
+        # A low-rank x0_cov hides modes from the finite-horizon cost, whose minima then need not
+        # stabilize; the random starts' polishes run to their limit there (minutes at N = 6, nothing
+        # found), so the infinite-horizon cost takes over after the callers' starts.
+        found = search(polish, callers(), exhaustive=exhaustive)
+        if found is not None and found.stable:
+            return found
+        rescued = _horizon_free_delayed(instance, free, found, maxiter)
+        if rescued is not None:
+            return rescued
     if not exhaustive:
         return search(polish, itertools.chain(callers(), local()), exhaustive=False)
     # Every caller's start and the diagonal gain polished, the lowest stabilizing minimum kept; the local
@@ -807,6 +820,58 @@ def stabilizing_delayed(instance, K_local, K_delayed, free, *, decentral: Decent
     tried = (found.tried if found is not None else 0) + (more.tried if more is not None else 0)
     kept = more if found is None or (more is not None and (more.stable or more.radius < found.radius)) else found
     return kept._replace(tried=tried)
+
+
+def delayed_augmented(instance):
+    """The delayed gain as a static gain ``[K_local, K_delayed]`` on the state ``[x(t); x(t − 1)]``.
+
+    The returned :class:`~codesign.Instance` has ``A = [[A, 0], [I, 0]]``, ``B = [B; 0]``,
+    ``Q = diag(Q, 0)`` and x(−1) = 0 (``x0_cov = diag(Σ₀, 0)``), so its static-gain cost
+    is the delayed gain's and its normalizer the instance's; its closed loop is
+    :func:`delayed_closed_loop`. Only what the infinite-horizon search reads is meaningful.
+    """
+    from codesign import Instance
+
+    n = instance.n
+    zero = np.zeros((n, n))
+    A = np.block([[instance.A, zero], [np.eye(n), zero]])
+    B = np.vstack([instance.B, np.zeros_like(instance.B)])
+    Q = np.block([[instance.Q, zero], [zero, zero]])
+    P = np.block([[instance.P, zero], [zero, zero]])
+    cov = np.block([[np.array(instance.x0_covariance), zero], [zero, zero]])
+    return Instance(A, B, Q, instance.R, P, instance.horizon, instance.comm_adj, instance.plant_adj,
+                    dict(instance.spec), np.concatenate([instance.state_nodes, instance.state_nodes]),
+                    instance.input_nodes, cov)
+
+
+def _horizon_free_delayed(instance, free, found: Minimum | None, maxiter: int) -> Minimum | None:
+    """The delayed gain minimizing the infinite-horizon cost on ``free``, from a stabilizing start; None if none.
+
+    Which gains stabilize does not depend on x0_cov: the search with x(0) ~ N(0, I) gives
+    the start, and :func:`baselines.stabilizing.horizon_free_gain` on
+    :func:`delayed_augmented` keeps every iterate stabilizing.
+    """
+    nodes = Nodes(instance)
+    start = found.gain if found is not None else (np.zeros((instance.m, instance.n)),) * 2
+    plain = stabilizing_delayed(replace(instance, x0_cov=None), start[0], start[1], free, maxiter=maxiter)
+    if not plain.stable:
+        return None
+    mask = np.hstack([instance.block_mask(), np.asarray(free, dtype=bool)])
+    rescued = horizon_free_gain(delayed_augmented(instance), mask, np.hstack(plain.gain))
+    if rescued is None:
+        return None
+    K, radius, rounds, iterations = rescued
+    local, K_delayed = nodes.local(K[:, :instance.n]), K[:, instance.n:]
+    cost, grad_norm = _masked_grad_norm(instance, nodes, local, K_delayed, free)
+    where = "" if found is None else f" (the least unstable, from {found.start}, at spectral radius {found.radius:.6g})"
+    message = (f"the finite-horizon cost's minima on this pattern do not stabilize{where}: it weighs a mode only by "
+               f"what the initial-state covariance x0_cov puts into it; this gain minimizes the infinite-horizon cost "
+               f"on the pattern instead (from the stabilizing minimum for x(0) ~ N(0, I), {rounds} discounted rounds, "
+               f"spectral radius {radius:.6g})")
+    result = DelayedGainResult(local, K_delayed, cost, grad_norm, False, message, iterations, 0)
+    tried = (found.tried if found is not None else 0) + plain.tried
+    return Minimum((nodes.local_matrix(local), K_delayed), float(cost), float(radius), result, "horizon-free",
+                   tried, instance)
 
 
 # -- from a gain to a design ---------------------------------------------------------

@@ -6,7 +6,8 @@ With ``u = -K x`` (docs/methods.md; the designs returned here store the evaluato
     minimize    [tr(QX) + tr(R Y X⁻¹ Y')] / trace(P) + γ Σ_{i≠j} |Y_ij|
     subject to  [[X − I, AX − BY], [(AX − BY)', X]] ⪰ 0,   X = diag(x).
 
-The LMI is A_cl X A_cl' + I ⪯ X, so X bounds the closed-loop covariance sum and
+The LMI is A_cl X A_cl' + I ⪯ X (I is the initial-state covariance Σ₀ where the
+instance sets ``x0_cov``, which must then be positive definite), so X bounds the closed-loop covariance sum and
 the bracket bounds trace(P_K) from above; every solution stabilizes. γ is in
 units of the normalized cost, as in :mod:`baselines.sparse_admm` (the lqrsp γ
 is this one times trace(P), the LQR cost). X is
@@ -169,6 +170,10 @@ class SparseSDP:
     """
 
     def __init__(self, instance, *, solver: str = "auto", max_iter: int | None = None, eps: float = SCS_EPS):
+        if instance.x0_factor is not None and instance.x0_factor.shape[1] < instance.n:
+            raise ValueError(f"sparse_sdp needs a positive definite x0_cov: its LMI X ⪰ A_cl X A_cl' + x0_cov "
+                             f"certifies a stabilizing K = Y X⁻¹ only then (x0_cov has rank "
+                             f"{instance.x0_factor.shape[1]} of {instance.n}); use sparse_newton or sparse_admm")
         cp = self._cp = _cvxpy()
         solver = self.solver = resolve_solver(solver, instance)
         self.max_iter = _DEFAULT_MAX_ITER[solver] if max_iter is None else max_iter
@@ -186,7 +191,7 @@ class SparseSDP:
         RY = R_half @ self.Y
         X = cp.diag(self.x)
         AXBY = instance.A @ X - instance.B @ self.Y
-        self.lmi = cp.bmat([[X - np.eye(n), AXBY], [AXBY.T, X]]) >> 0
+        self.lmi = cp.bmat([[X - instance.x0_covariance, AXBY], [AXBY.T, X]]) >> 0
         off = 1.0 - np.eye(n)
         objective = (
             cp.trace(instance.Q @ X)
@@ -212,7 +217,7 @@ class SparseSDP:
         R_half = np.linalg.cholesky(instance.R).T  # R = R_half' R_half
         RY = R_half @ self.Y
         AXBY = instance.A @ X - instance.B @ self.Y
-        self.lmi = cp.bmat([[X - np.eye(n), AXBY], [AXBY.T, X]]) >> 0
+        self.lmi = cp.bmat([[X - instance.x0_covariance, AXBY], [AXBY.T, X]]) >> 0
         # tr(R Y X^-1 Y') = sum over nodes i and rows k of (R^1/2 Y)[k, S_i] X_i^-1 (R^1/2 Y)[k, S_i]':
         # m small (p_i + 1) x (p_i + 1) Schur cones per node rather than one (p_i + m) cone.
         smooth = []

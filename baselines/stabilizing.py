@@ -43,6 +43,7 @@ it is not that cost's minimum. Where the horizon sees the instability, nothing c
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Callable, Iterable, Iterator, NamedTuple
 
 import numpy as np
@@ -311,22 +312,43 @@ def stabilizing_gain(instance, mask, starts: Iterable[tuple[str, np.ndarray]], *
 
 
 def _horizon_blind(instance, radius) -> bool:
-    """Whether the horizon is too short to see this closed loop's instability (``T ln(radius) <= BLIND_GROWTH``)."""
-    return bool(np.isfinite(radius) and instance.horizon * np.log(max(radius, 1e-300)) <= BLIND_GROWTH)
+    """Whether the finite-horizon cost may not see this closed loop's instability.
+
+    Either the horizon is too short (``T ln(radius) <= BLIND_GROWTH``), or the instance
+    sets an initial-state covariance Σ₀: the cost then weighs a mode only by what Σ₀
+    puts into it, which for a low-rank Σ₀ (disturbances through a few channels B1) can be
+    too little for an unstable mode to show within the horizon. The infinite-horizon
+    cost sees every mode that Σ₀ reaches at all.
+    """
+    if not np.isfinite(radius):
+        return False
+    return bool(instance.x0_cov is not None or instance.horizon * np.log(max(radius, 1e-300)) <= BLIND_GROWTH)
 
 
 def _horizon_free_minimum(instance, mask, found: Minimum) -> Minimum | None:
     """:func:`horizon_free_gain` from the least unstable minimum, as the search's :class:`Minimum`; None if it fails."""
     start = found.gain if np.all(np.isfinite(found.gain)) else np.zeros(mask.shape)
     free = horizon_free_gain(instance, mask, start)
+    via = ""
+    if free is None and instance.x0_cov is not None:
+        # Which gains stabilize does not depend on Σ₀: the search for Σ₀ = I, whose cost weighs every
+        # mode, gives a stabilizing start, and the infinite-horizon cost is finite only where K stabilizes.
+        plain = stabilizing_gain(replace(instance, x0_cov=None), mask, [(found.start, start)])
+        if plain.stable:
+            free = horizon_free_gain(instance, mask, plain.gain)
+            via = "from the stabilizing minimum for x(0) ~ N(0, I), "
     if free is None:
         return None
     K, radius, rounds, iterations = free
     cost, grad = static_gain_cost_and_grad(instance, K, mask=mask)
+    if instance.x0_cov is None:
+        blind = (f"grows at most e-fold over the {instance.horizon}-step horizon, which cannot tell it from a "
+                 "slow stable mode")
+    else:
+        blind = "and the cost weighs a mode only by what the initial-state covariance x0_cov puts into it"
     message = (f"the finite-horizon cost's minima on this pattern do not stabilize (the least unstable, from "
-               f"{found.start}, at spectral radius {found.radius:.6g}, grows at most e-fold over the "
-               f"{instance.horizon}-step horizon, which cannot tell it from a slow stable mode); this gain minimizes "
-               f"the infinite-horizon cost on the pattern instead ({rounds} discounted rounds, spectral radius "
+               f"{found.start}, at spectral radius {found.radius:.6g}, {blind}); this gain minimizes "
+               f"the infinite-horizon cost on the pattern instead ({via}{rounds} discounted rounds, spectral radius "
                f"{radius:.6g})")
     result = PolishResult(K, float(cost), float(np.linalg.norm(grad[mask])), False, message, iterations)
     return Minimum(K, float(cost), float(radius), result, "horizon-free", found.tried + 1, instance)
@@ -336,7 +358,7 @@ def lyapunov_cost_and_grad(instance, K, mask=None, *, discount: float = 1.0) -> 
     """The infinite-horizon cost of ``u = K x`` (normalized), discounted by ``discount``, and its gradient.
 
     With the scaled closed loop ``F = (A + BK) / discount``, ``P = F' P F + Q + K'RK`` and
-    ``S = F S F' + I`` (Lyapunov equations), the cost is ``trace(P) / trace(P_lqr)`` (the
+    ``S = F S F' + Σ₀`` (Lyapunov equations), the cost is ``trace(P Σ₀) / trace(P_lqr Σ₀)`` (the
     finite-horizon cost's limit as the horizon grows, for ``discount = 1``: 1 for the
     LQR gain) and its gradient ``2 (R K + B' P F / discount) S / trace(P_lqr)``. The
     discount ``alpha`` weighs step t by ``alpha^(-2t)``: finite wherever the closed
@@ -369,11 +391,11 @@ def lyapunov_cost_and_grad(instance, K, mask=None, *, discount: float = 1.0) -> 
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         try:
             P = scipy.linalg.solve_discrete_lyapunov(F.T, instance.Q + K.T @ instance.R @ K)
-            S = scipy.linalg.solve_discrete_lyapunov(F, np.eye(instance.n))
+            S = scipy.linalg.solve_discrete_lyapunov(F, np.array(instance.x0_covariance))
         except (np.linalg.LinAlgError, ValueError):
             return np.inf, np.zeros_like(K)
     scale = instance.trace_P
-    cost = float(np.trace(P) / scale)
+    cost = float((np.trace(P) if instance.x0_cov is None else np.sum(P * instance.x0_cov)) / scale)
     grad = 2.0 * (instance.R @ K + instance.B.T @ P @ F / discount) @ S / scale
     if not (np.isfinite(cost) and np.all(np.isfinite(grad))):
         return np.inf, np.zeros_like(K)

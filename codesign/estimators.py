@@ -1,7 +1,9 @@
 """Estimators of a controller's expected cost from simulated draws.
 
 Two unbiased estimators, both built on quantities whose expectation under
-x0 ~ N(0, I) is known exactly:
+x0 ~ N(0, Σ₀) is known exactly (Σ₀ = I unless the instance sets
+:attr:`~codesign.Instance.x0_cov`; with Σ₀ = F F', a proposal tilts z ~ N(0, I)
+in x0 = F z):
 
 - :func:`control_variate_estimate`: the mean of J(x0) over validation draws,
   corrected by cross-fitted quadratic monomials ``x0_i x0_j`` (means delta_ij).
@@ -56,7 +58,11 @@ DEFENSIVE_SHARE = 0.2
 
 @dataclass(frozen=True)
 class _Features:
-    """Quadratic monomials of x0 chosen for a draw count, with their exact means."""
+    """Quadratic monomials of x0 chosen for a draw count, with their exact means.
+
+    With an initial-state covariance Σ₀ = F F' the monomials are those of z = F⁺ x0
+    (z ~ N(0, I_r)): monomials of x0 itself are collinear when Σ₀ is singular.
+    """
 
     rows: np.ndarray
     cols: np.ndarray
@@ -64,7 +70,8 @@ class _Features:
     name: str
 
     def values(self, instance, x0):
-        features = x0[:, self.rows] * x0[:, self.cols]
+        z = x0 if instance.x0_cov is None else x0 @ instance.x0_whitener.T
+        features = z[:, self.rows] * z[:, self.cols]
         if self.with_P:
             features = np.hstack([features, np.einsum("bi,bi->b", x0 @ instance.P, x0)[:, None]])
         return features
@@ -75,10 +82,12 @@ class _Features:
 
     def form(self, instance, coef) -> np.ndarray:
         """The symmetric matrix M with x0'Mx0 = coef @ features(x0)."""
-        n = instance.n
-        M = np.zeros((n, n))
+        width = instance.n if instance.x0_cov is None else instance.x0_factor.shape[1]
+        M = np.zeros((width, width))
         M[self.rows, self.cols] += coef[:self.rows.size] / 2
         M[self.cols, self.rows] += coef[:self.rows.size] / 2
+        if instance.x0_cov is not None:  # z'Mz with z = W x0
+            M = instance.x0_whitener.T @ M @ instance.x0_whitener
         return M + coef[-1] * instance.P if self.with_P else M
 
 
@@ -88,6 +97,14 @@ def _choose_features(instance, draws: int) -> _Features:
     LQR's cost-to-go, the best single quadratic guess)."""
     n = instance.n
     budget = min(_MAX_FEATURES, (draws * (CV_FOLDS - 1)) // (CV_FOLDS * _ROWS_PER_FEATURE))
+    if instance.x0_cov is not None:  # monomials of z, which have no nodes
+        r = instance.x0_factor.shape[1]
+        rows, cols = np.triu_indices(r)
+        if rows.size <= budget:
+            return _Features(rows, cols, False, f"all {rows.size} quadratic monomials of z (x0 = F z)")
+        if r + 1 <= budget:
+            return _Features(np.arange(r), np.arange(r), True, f"{r} squares of z (x0 = F z) + x0'Px0")
+        return _Features(np.arange(0), np.arange(0), True, "x0'Px0")
     rows, cols = np.triu_indices(n)
     if rows.size <= budget:
         return _Features(rows, cols, False, f"all {rows.size} quadratic monomials")
@@ -174,7 +191,7 @@ def control_variate_estimate(instance, x0, costs, form=None) -> tuple[float, flo
 
     def centered_rows(index):
         columns = [np.ones((index.size, 1)), chosen.values(instance, x0[index]) - means]
-        columns += [_form_feature(x0[index], M) for M in extra]
+        columns += [_form_feature(instance, x0[index], M) for M in extra]
         return np.hstack(columns)
 
     residuals, fit = _cross_fit(centered_rows, costs)
@@ -182,9 +199,14 @@ def control_variate_estimate(instance, x0, costs, form=None) -> tuple[float, flo
     return float(residuals.mean()), float(residuals.std(ddof=1) / np.sqrt(m)), estimator
 
 
-def _form_feature(x0, M) -> np.ndarray:
-    """``x0'Mx0 - tr M`` per row, as a column (mean 0 under N(0, I))."""
-    return (np.einsum("bi,bi->b", x0 @ M, x0) - np.trace(M))[:, None]
+def _x0_mean(instance, M) -> float:
+    """E[x0'Mx0] = tr(M Σ₀)."""
+    return float(np.trace(M)) if instance.x0_cov is None else float(np.sum(M * instance.x0_cov))
+
+
+def _form_feature(instance, x0, M) -> np.ndarray:
+    """``x0'Mx0 - tr(M Σ₀)`` per row, as a column (mean 0)."""
+    return (np.einsum("bi,bi->b", x0 @ M, x0) - _x0_mean(instance, M))[:, None]
 
 
 def projected_relative_stderr(instance, x0, costs, draws: int, form=None, weights=None, *,
@@ -231,7 +253,7 @@ def projected_relative_stderr(instance, x0, costs, draws: int, form=None, weight
 
         def centered_rows(index):
             columns = [np.ones((index.size, 1)), chosen.values(instance, x0[index]) - means]
-            columns += [(np.einsum("bi,ij,bj->b", x0[index], M, x0[index]) - np.trace(M))[:, None] for M in extra]
+            columns += [_form_feature(instance, x0[index], M) for M in extra]
             return root[index, None] * np.hstack(columns)  # weighted least squares
 
         residuals = _cross_fit(centered_rows, root * costs)[0] / root
@@ -265,6 +287,9 @@ class TiltedProposal:
     variance along ``M``'s top eigenvector grows by ``inflation``: the tilt
     ``p(x) exp(t x'M+x)`` of N(0, I), normalized. Draws come from the instance's
     own stream, nested (a smaller set is the first rows of a larger one).
+
+    With an initial-state covariance Σ₀ = F F' (``factor`` F, n × r) the mixture
+    is of z ~ N(0, I_r) and the tilt of z along F'MF; draws are x0 = F z.
     """
 
     form: np.ndarray
@@ -273,15 +298,17 @@ class TiltedProposal:
     t: float
     inflation: float = TILT_INFLATION
     share: float = DEFENSIVE_SHARE
+    factor: np.ndarray | None = None
 
     @classmethod
-    def along(cls, form, *, inflation: float = TILT_INFLATION, share: float = DEFENSIVE_SHARE) -> "TiltedProposal":
+    def along(cls, form, *, inflation: float = TILT_INFLATION, share: float = DEFENSIVE_SHARE,
+              factor=None) -> "TiltedProposal":
         form = (np.asarray(form, dtype=float) + np.asarray(form, dtype=float).T) / 2
-        eigvals, eigvecs = np.linalg.eigh(form)
+        eigvals, eigvecs = np.linalg.eigh(form if factor is None else factor.T @ form @ factor)
         eigvals = np.clip(eigvals, 0.0, None)
         top = eigvals.max()
         t = (1 - 1 / inflation) / (2 * top) if top > 0 else 0.0
-        return cls(form, eigvals, eigvecs, float(t), float(inflation), float(share))
+        return cls(form, eigvals, eigvecs, float(t), float(inflation), float(share), factor)
 
     @property
     def scales(self) -> np.ndarray:
@@ -290,13 +317,16 @@ class TiltedProposal:
 
     def draw(self, instance, size: int, stream: tuple[int, ...]) -> np.ndarray:
         """The first ``size`` draws of the proposal from the instance's ``stream`` (a tuple of ints)."""
-        z = np.random.default_rng([instance.seed, *stream, 0]).standard_normal((size, instance.n))
+        width = instance.n if self.factor is None else self.factor.shape[1]
+        z = np.random.default_rng([instance.seed, *stream, 0]).standard_normal((size, width))
         tilted = np.random.default_rng([instance.seed, *stream, 1]).random(size) >= self.share
         z[tilted] = (z[tilted] @ self.eigvecs * self.scales) @ self.eigvecs.T
-        return z
+        return z if self.factor is None else z @ self.factor.T
 
     def weights(self, x) -> np.ndarray:
-        """Likelihood ratios p(x) / q(x) of N(0, I) to the proposal, at most 1 / share."""
+        """Likelihood ratios p(x) / q(x) of N(0, Σ₀) to the proposal, at most 1 / share."""
+        if self.factor is not None:  # back to z: F has full column rank and x = F z
+            x = np.asarray(x, dtype=float) @ np.linalg.pinv(self.factor).T
         y = x @ self.eigvecs
         log_ratio = self.t * np.einsum("bi,i,bi->b", y, self.eigvals, y) - np.log(self.scales).sum()
         with np.errstate(over="ignore"):
@@ -335,7 +365,8 @@ def importance_estimate(instance, x, costs, proposal: TiltedProposal) -> tuple[f
     chosen = _choose_features(instance, m)
     means = chosen.means(instance)
     M = proposal.form
-    k1, k2, k3 = np.trace(M), 2 * np.trace(M @ M), 8 * np.trace(M @ M @ M)
+    Mz = M if proposal.factor is None else proposal.factor.T @ M @ proposal.factor  # x0'Mx0 = z'Mz z
+    k1, k2, k3 = np.trace(Mz), 2 * np.trace(Mz @ Mz), 8 * np.trace(Mz @ Mz @ Mz)
     q = np.einsum("bi,bi->b", x @ M, x)
     others = np.column_stack([w - 1, w * q**2 - (k2 + k1**2), w * q**3 - (k3 + 3 * k2 * k1 + k1**3)])
 

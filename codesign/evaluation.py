@@ -127,6 +127,14 @@ _MASK_BLOCK = 16
 _MASK_DENSE_FRACTION = 0.25
 
 
+def _x0_trace(instance, P, order=None) -> float:
+    """E[x(0)' P x(0)] = trace(P Σ₀); ``order``: the states' order P is in (a :class:`_ClosedLoop`'s)."""
+    if instance.x0_cov is None:
+        return float(np.trace(P))
+    cov = instance.x0_cov if order is None else instance.x0_cov[np.ix_(order, order)]
+    return float(np.sum(P * cov))
+
+
 def _cost_to_go(instance, K):
     """Backward recursion P_t = Q + K'RK + Acl' P_{t+1} Acl, P_T = P; returns [P_0..P_T]."""
     Acl = instance.A + instance.B @ K
@@ -371,7 +379,7 @@ def static_gain_cost(instance, K, *, noise_std: float = 0.0) -> float:
 
     Notes
     -----
-    The cost is ``trace(P_0) + noise_std^2 * sum_{t=1..T} trace(P_t)`` with the
+    The cost is ``trace(P_0 Σ₀) + noise_std^2 * sum_{t=1..T} trace(P_t)`` with the
     cost-to-go ``P_t = Q + K'RK + Acl' P_{t+1} Acl``, ``P_T = P``. Above
     :data:`STRUCTURED_ABOVE` states the recursion runs on a sparse closed loop
     (:class:`_ClosedLoop`), one ``P_t`` at a time.
@@ -379,7 +387,7 @@ def static_gain_cost(instance, K, *, noise_std: float = 0.0) -> float:
     K = np.asarray(K, dtype=float)
     if instance.n <= STRUCTURED_ABOVE:
         Ps, _ = _cost_to_go(instance, K)
-        total = np.trace(Ps[0]) + noise_std**2 * sum(np.trace(Pt) for Pt in Ps[1:])
+        total = _x0_trace(instance, Ps[0]) + noise_std**2 * sum(np.trace(Pt) for Pt in Ps[1:])
         return float(total / instance.trace_P)
     loop = _ClosedLoop(instance, K)
     P = loop.terminal
@@ -387,13 +395,13 @@ def static_gain_cost(instance, K, *, noise_std: float = 0.0) -> float:
     for _ in range(instance.horizon):
         later += np.trace(P)
         P, _ = loop.cost_to_go_step(P)
-    return float((np.trace(P) + noise_std**2 * later) / instance.trace_P)
+    return float((_x0_trace(instance, P, loop.states) + noise_std**2 * later) / instance.trace_P)
 
 
 def static_gain_cost_and_grad(instance, K, *, mask=None) -> tuple[float, np.ndarray]:
     """Exact normalized cost of ``u = K x`` and its gradient with respect to K.
 
-    With Sigma_t = E[x(t) x(t)'] = Acl^t Acl^t', the gradient is
+    With Sigma_t = E[x(t) x(t)'] = Acl^t Σ₀ Acl^t', the gradient is
     ``sum_t 2 (R K + B' P_{t+1} Acl) Sigma_t`` (divided by trace(P)).
 
     Parameters
@@ -418,7 +426,7 @@ def static_gain_cost_and_grad(instance, K, *, mask=None) -> tuple[float, np.ndar
     if instance.n <= STRUCTURED_ABOVE:
         Ps, Acl = _cost_to_go(instance, K)
         grad = np.zeros_like(K)
-        sigma = np.eye(instance.n)
+        sigma = np.array(instance.x0_covariance)
         RK = instance.R @ K
         for t in range(instance.horizon):
             grad += (RK + instance.B.T @ Ps[t + 1] @ Acl) @ sigma
@@ -426,7 +434,7 @@ def static_gain_cost_and_grad(instance, K, *, mask=None) -> tuple[float, np.ndar
         scale = instance.trace_P
         if mask is not None:
             grad = np.where(mask, grad, 0.0)
-        return float(np.trace(Ps[0]) / scale), 2.0 * grad / scale
+        return float(_x0_trace(instance, Ps[0]) / scale), 2.0 * grad / scale
     return _structured_cost_and_grad(instance, K, mask)
 
 
@@ -437,7 +445,8 @@ def _structured_cost_and_grad(instance, K, mask):
     matrices: 400 MB at n = 1000, T = 50); the backward sweep then needs one P_t at a time.
     """
     loop = _ClosedLoop(instance, K)
-    sigmas = [np.eye(instance.n)]
+    s = loop.states
+    sigmas = [np.eye(instance.n) if instance.x0_cov is None else instance.x0_cov[np.ix_(s, s)]]
     for _ in range(instance.horizon - 1):
         sigmas.append(loop.covariance_step(sigmas[-1]))
     product = None if mask is None else MaskedProduct(loop.gain_order(mask))
@@ -454,7 +463,7 @@ def _structured_cost_and_grad(instance, K, mask):
         sigmas[t] = None  # one covariance fewer held from here on
     grad = loop.original_order(grad if product is None else product.result())
     scale = instance.trace_P
-    return float(np.trace(P) / scale), 2.0 * grad / scale
+    return float(_x0_trace(instance, P, loop.states) / scale), 2.0 * grad / scale
 
 
 def _einsum_traces(maps, W) -> np.ndarray:
@@ -482,7 +491,9 @@ def response_cost(instance, phi_x, phi_u, *, noise_std: float = 0.0) -> float:
         t = 0..T-1, for a time-invariant closed loop: the noise entering at time s
         is answered by the same maps with T - s steps left, so with c(m) the cost
         of the maps over horizon m (terminal P at m),
-        ``E[J] = c(T) + noise_std^2 * sum_{m<T} c(m)``.
+        ``E[J] = c(T) + noise_std^2 * sum_{m<T} c(m)``. With an initial-state
+        covariance Σ₀ = F F' (:attr:`~codesign.Instance.x0_cov`) the first term
+        is that of the maps times F; the noise stays N(0, noise_std^2 I).
     """
     phi_x = np.asarray(phi_x, dtype=float)
     phi_u = np.asarray(phi_u, dtype=float)
@@ -495,18 +506,24 @@ def response_cost(instance, phi_x, phi_u, *, noise_std: float = 0.0) -> float:
     if not (np.isfinite(noise_std) and noise_std >= 0):
         raise ValueError(f"noise_std must be a non-negative number, got {noise_std!r}")
     quadratic = _quadratic_traces if n > STRUCTURED_ABOVE else _einsum_traces
+    F = instance.x0_factor
+    if F is not None:
+        start = (quadratic(phi_x[:T] @ F, instance.Q).sum() + quadratic(phi_u @ F, instance.R).sum()
+                 + quadratic(phi_x[T:] @ F, instance.P)[0])
+        if not noise_std:
+            return float(start / instance.trace_P)
     stage = quadratic(phi_x[:T], instance.Q) + quadratic(phi_u, instance.R)
     if not noise_std:
         total = stage.sum() + quadratic(phi_x[T:], instance.P)[0]
         return float(total / instance.trace_P)
     terminal = quadratic(phi_x, instance.P)
     horizon_cost = np.concatenate([[0.0], np.cumsum(stage)]) + terminal  # c(m), m = 0..T
-    total = horizon_cost[T] + noise_std**2 * horizon_cost[:T].sum()
+    total = (horizon_cost[T] if F is None else start) + noise_std**2 * horizon_cost[:T].sum()
     return float(total / instance.trace_P)
 
 
 def validation_set(instance, size: int = VALIDATION_SIZE, *, seed: int | None = None) -> np.ndarray:
-    """The fixed set of initial conditions x(0) ~ N(0, I) used to score controllers.
+    """The fixed set of initial conditions x(0) ~ N(0, Σ₀) used to score controllers (Σ₀ = I by default).
 
     The same instance (and seed) always gives the same set, so every method on
     an instance is scored on the same draws. ``seed`` defaults to the instance's
@@ -516,7 +533,7 @@ def validation_set(instance, size: int = VALIDATION_SIZE, *, seed: int | None = 
         raise ValueError(f"validation size must be at least 2, got {size}")
     seed = instance.seed if seed is None else int(seed)
     rng = np.random.default_rng([seed, _VALIDATION_SALT])
-    return rng.standard_normal((size, instance.n))
+    return instance.initial_states(rng, size)
 
 
 @dataclass(frozen=True)
@@ -765,10 +782,10 @@ def _pilot(instance, controller, size: int, form, form_in_estimate: bool) -> tup
     validation estimate has it among its features.
     """
     if form is None:
-        x = np.random.default_rng([instance.seed, _PILOT_SALT]).standard_normal((PILOT_SIZE, instance.n))
+        x = instance.initial_states(np.random.default_rng([instance.seed, _PILOT_SALT]), PILOT_SIZE)
         weights = None
     else:
-        proposal = TiltedProposal.along(form)
+        proposal = TiltedProposal.along(form, factor=instance.x0_factor)
         x = proposal.draw(instance, PILOT_SIZE, (_PILOT_SALT,))
         weights = proposal.weights(x)
     pilot = simulate(instance, controller, x, control_variates=False)
@@ -866,7 +883,7 @@ def _refine(instance, controller, first: Rollout, x0, record: PrecisionRecord) -
     while total < max_size and (batch == 0 or rollout.stderr > target * abs(rollout.cost)):
         count = min(total, max_size - total)
         recent_x, recent_costs = np.vstack(draws)[-_REFIT_DRAWS:], np.concatenate(costs)[-_REFIT_DRAWS:]
-        proposal = TiltedProposal.along(fitted_cost_form(instance, recent_x, recent_costs))
+        proposal = TiltedProposal.along(fitted_cost_form(instance, recent_x, recent_costs), factor=instance.x0_factor)
         x = proposal.draw(instance, count, (_PROPOSAL_SALT, batch))
         more = simulate(instance, controller, x, control_variates=False)
         if not more.bounded:

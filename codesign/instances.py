@@ -99,6 +99,12 @@ class Instance:
     state_nodes, input_nodes : ndarray of int, shapes (n,) and (m,)
         The node each state and each input belongs to (nodes 0..N-1). By default
         one state and one input per node, in order (the paper's family).
+    x0_cov : ndarray, shape (n, n), or None
+        Covariance Σ₀ of the initial state, ``x(0) ~ N(0, Σ₀)``; None (the
+        default, and the paper's problem) is the identity. Every cost, gradient
+        and the normalizer :attr:`trace_P` = trace(P Σ₀) read it, so a problem
+        whose source weights disturbances by ``B1 B1'`` (an H2 problem, as in
+        lqrsp) is posed with ``x0_cov = B1 @ B1.T``. It may be singular.
     """
 
     A: np.ndarray
@@ -112,6 +118,7 @@ class Instance:
     spec: dict[str, Any] = field(default_factory=dict)
     state_nodes: np.ndarray | None = None
     input_nodes: np.ndarray | None = None
+    x0_cov: np.ndarray | None = None
 
     # -- construction -----------------------------------------------------
     @classmethod
@@ -127,6 +134,7 @@ class Instance:
         name: str | None = None,
         state_nodes=None,
         input_nodes=None,
+        x0_cov=None,
     ) -> "Instance":
         """Build an instance from a user's own matrices, with validation.
 
@@ -152,12 +160,17 @@ class Instance:
         input_nodes : array_like of int, shape (m,), optional
             The node of each input (a node may have none). Default: one input per
             node, which needs m = N.
+        x0_cov : array_like, shape (n, n), optional
+            Covariance of the initial state, symmetric positive semidefinite;
+            the identity by default. For a disturbance input ``B1`` (the H2
+            problem ``trace(B1' P_K B1)``) pass ``B1 @ B1.T``.
 
         Raises
         ------
         InstanceError
             Naming the problem: shapes, non-finite entries, Q not PSD, R not PD,
-            (A, B) not stabilizable, bad horizon.
+            x0_cov not PSD or not seen by the cost, (A, B) not stabilizable, bad
+            horizon.
         """
         A = _as_matrix("A", A)
         n = A.shape[0]
@@ -200,17 +213,23 @@ class Instance:
                 raise InstanceError(f"comm_adj must have shape {(nodes, nodes)} (one row per node), got {comm.shape}")
             comm = (comm != 0).astype(float)
         np.fill_diagonal(comm, 1.0)
+        cov = None if x0_cov is None else _covariance(x0_cov, n)
         P = solve_dare(A, B, Q, R)
+        if cov is not None and not np.sum(P * cov) > 0:
+            raise InstanceError("x0_cov: trace(P x0_cov) is 0, so LQR's cost and every normalized cost would be 0/0 "
+                                "(the initial states it allows cost nothing)")
         digest = hashlib.sha256()
         scalar = nodes == n == m and np.array_equal(state_nodes, np.arange(n)) and np.array_equal(input_nodes, np.arange(m))
-        for M in (A, B, Q, R, comm) + (() if scalar else (state_nodes, input_nodes)):
+        # x0_cov enters the digest only when given, so that every identity-covariance key stays what it was.
+        extra = (() if scalar else (state_nodes, input_nodes)) + (() if cov is None else (cov,))
+        for M in (A, B, Q, R, comm) + extra:
             digest.update(np.ascontiguousarray(M, dtype=float).tobytes())
         spec = {"family": "matrices", "n": nodes, "horizon": int(horizon), "sha256": digest.hexdigest()[:16]}
         if not scalar:
             spec.update(states=n, inputs=m)
         if name is not None:
             spec["name"] = str(name)
-        return cls(A, B, Q, R, P, int(horizon), comm, plant_adj, spec, state_nodes, input_nodes)
+        return cls(A, B, Q, R, P, int(horizon), comm, plant_adj, spec, state_nodes, input_nodes, cov)
 
     def __post_init__(self):
         for name in ("A", "B", "Q", "R", "P", "comm_adj", "plant_adj"):
@@ -221,6 +240,8 @@ class Instance:
             nodes = np.arange(size) if value is None else np.array(value, dtype=int, copy=True)
             nodes.setflags(write=False)
             object.__setattr__(self, name, nodes)
+        if self.x0_cov is not None:
+            object.__setattr__(self, "x0_cov", _frozen("x0_cov", _covariance(self.x0_cov, self.A.shape[0])))
 
     # -- derived quantities -------------------------------------------------
     @property
@@ -268,8 +289,47 @@ class Instance:
 
     @property
     def trace_P(self) -> float:
-        """Normalizer: centralized LQR's expected cost with x(0) ~ N(0, I)."""
-        return float(np.trace(self.P))
+        """Normalizer: centralized LQR's expected cost, trace(P Σ₀) with x(0) ~ N(0, Σ₀) (trace(P) by default)."""
+        if self.x0_cov is None:
+            return float(np.trace(self.P))
+        return float(np.sum(self.P * self.x0_cov))
+
+    @cached_property
+    def x0_covariance(self) -> np.ndarray:
+        """Σ₀, the covariance of x(0): :attr:`x0_cov`, or the identity."""
+        cov = np.eye(self.n) if self.x0_cov is None else self.x0_cov
+        cov.setflags(write=False)
+        return cov
+
+    @cached_property
+    def x0_factor(self) -> np.ndarray | None:
+        """F (n, r) with Σ₀ = F F' and r = rank Σ₀, so that ``x(0) = F z`` with z ~ N(0, I_r); None for Σ₀ = I."""
+        if self.x0_cov is None:
+            return None
+        values, vectors = np.linalg.eigh(self.x0_cov)
+        keep = values > 1e-12 * max(values.max(), 0.0)
+        F = vectors[:, keep] * np.sqrt(values[keep])
+        F.setflags(write=False)
+        return F
+
+    @cached_property
+    def x0_whitener(self) -> np.ndarray | None:
+        """W (r, n), the pseudo-inverse of :attr:`x0_factor`: z = W x(0) for every x(0) = F z; None for Σ₀ = I."""
+        if self.x0_factor is None:
+            return None
+        W = np.linalg.pinv(self.x0_factor)
+        W.setflags(write=False)
+        return W
+
+    def initial_states(self, rng, size: int) -> np.ndarray:
+        """``size`` draws of x(0) ~ N(0, Σ₀) from ``rng`` as rows (size, n).
+
+        With Σ₀ = I these are exactly ``rng.standard_normal((size, n))``, the
+        draws every shipped report rests on.
+        """
+        if self.x0_factor is None:
+            return rng.standard_normal((size, self.n))
+        return rng.standard_normal((size, self.x0_factor.shape[1])) @ self.x0_factor.T
 
     @cached_property
     def K_lqr(self) -> np.ndarray:
@@ -355,6 +415,22 @@ def _node_coupling(support: np.ndarray, row_nodes, col_nodes, nodes: int) -> np.
     """(N, N) 0/1 matrix: 1 where some row of node i and column of node j are coupled in ``support``."""
     coupled = _one_hot(row_nodes, nodes) @ support.astype(float) @ _one_hot(col_nodes, nodes).T
     return (coupled != 0).astype(float)
+
+
+def _covariance(value, n: int) -> np.ndarray:
+    """A validated initial-state covariance (n, n): symmetric positive semidefinite, finite, not zero."""
+    cov = _as_matrix("x0_cov", value)
+    if cov.shape != (n, n):
+        raise InstanceError(f"x0_cov must have shape {(n, n)} (one row per state), got {cov.shape}")
+    scale = max(1.0, float(np.abs(cov).max()))
+    if not np.allclose(cov, cov.T, atol=1e-10 * scale):
+        raise InstanceError("x0_cov must be symmetric")
+    low = float(np.linalg.eigvalsh(cov).min())
+    if low < -1e-10 * scale:
+        raise InstanceError(f"x0_cov must be positive semidefinite (smallest eigenvalue {low:.3g})")
+    if not np.any(cov):
+        raise InstanceError("x0_cov must not be zero: every initial state would be 0 and every cost 0")
+    return (cov + cov.T) / 2
 
 
 def _as_matrix(label: str, value) -> np.ndarray:

@@ -1,9 +1,11 @@
-"""The example notebook runs (reduced size) and its figure shows at least four methods."""
+"""The example notebooks run (reduced size) and show what they say."""
 
 import runpy
 from pathlib import Path
 
 import matplotlib
+import numpy as np
+import pytest
 
 matplotlib.use("Agg")
 
@@ -36,3 +38,23 @@ def test_graph_against_controller_notebook_splits_every_excess(monkeypatch, tmp_
     # than the best: both gaps are non-negative, and the densest design's graph is the best within its budget.
     assert (gaps[:, 2] >= -1e-12).all() and (gaps[:, 3] >= -1e-12).all()
     assert gaps[gaps[:, 0].argmax(), 2] == 0
+
+
+WEIGHTING = EXAMPLE.parent / "disturbance_weighting.py"
+
+
+def test_disturbance_weighting_notebook_poses_the_h2_problem(monkeypatch, tmp_path):
+    monkeypatch.setenv("EXAMPLES_SMALL", "1")
+    monkeypatch.chdir(tmp_path)
+    namespace = runpy.run_path(str(WEIGHTING), run_name="__main__")
+    h2, B1 = namespace["h2"], namespace["B1"]
+    # The normalizer is LQR's H2 cost, and the decentralized gain's cost its closed-form Lyapunov value.
+    assert h2.trace_P == pytest.approx(np.trace(B1.T @ h2.P @ B1), rel=1e-12)
+    design = namespace["design"]
+    assert design.cost == pytest.approx(namespace["closed_form"], rel=1e-9)
+    # The weighting changes the problem: the same gain search under x(0) ~ N(0, I) gives another number.
+    assert abs(namespace["plain"].trace_P - h2.trace_P) > 1e-3
+    # The l1 path runs from near-centralized gains down to the decentralized end (0 links).
+    rows = namespace["rows"]
+    assert rows[-1, 1] == 0 and rows[-1, 2] == pytest.approx(design.cost, rel=1e-6)
+    assert rows[0, 2] < rows[-1, 2]

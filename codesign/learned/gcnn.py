@@ -293,7 +293,7 @@ def ensemble_member(job: _Job, m: int) -> Member:
     channels, outputs = node_width(inst.state_nodes), node_width(inst.input_nodes)
     H0, w0 = gcnn_init(np.random.default_rng([job.seed, m, _INIT]), GCNN_TAPS, GCNN_FEATURES, channels, outputs)
     return Member(problem=GCNNProblem(inst, H0, w0), data_seed=[job.seed, m, _DATA], curve_x0=selection_set(inst, s.curve_size),
-                  lr=s.lr, decay=s.decay)
+                  lr=s.lr, decay=s.decay, x0_factor=inst.x0_factor)
 
 
 def gcnn_batch(jobs, *, stack_size: int = 64) -> list[Design]:

@@ -270,7 +270,7 @@ def _spec(job: _Job, member: int, *, S0, mask, lr, beta, penalty, init_salt, fwg
         A=padded["A"], B=padded["B"], Q=padded["Q"], R=padded["R"], P=padded["P"], trace_P=inst.trace_P,
         S0=np.asarray(S0, dtype=float), mask=np.asarray(mask, dtype=bool), F0=F, W0=W, G0=G,
         data_seed=[job.seed, member, _DATA], curve_x0=padded["embed"](selection_set(inst, s.curve_size)),
-        lr=lr, beta=beta, penalty=penalty, state_index=padded["state_index"],
+        lr=lr, beta=beta, penalty=penalty, state_index=padded["state_index"], x0_factor=inst.x0_factor,
     )
 
 

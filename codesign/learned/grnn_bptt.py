@@ -104,6 +104,9 @@ class ModelSpec:
         Where each of the n states sits in the padded state vector: training
         draws x(0) ~ N(0, I_n) are placed there, the padding stays 0. None: the
         states are the plant's rows, in order.
+    x0_factor : ndarray (n, r), optional
+        F of the instance's initial-state covariance Σ₀ = F F': training draws
+        are x(0) = F z with z ~ N(0, I_r). None: Σ₀ = I.
     """
 
     A: np.ndarray
@@ -123,11 +126,12 @@ class ModelSpec:
     beta: float = 0.0
     penalty: tuple = (2.0, 2.0, 0.0, 2.0)
     state_index: np.ndarray | None = None
+    x0_factor: np.ndarray | None = None
 
     def member(self) -> Member:
         """This model as a member of a trainer's stack."""
         return Member(problem=self, data_seed=self.data_seed, curve_x0=self.curve_x0, lr=self.lr,
-                      placement=self.state_index)
+                      placement=self.state_index, x0_factor=self.x0_factor)
 
 
 class _Problem:

@@ -135,6 +135,9 @@ class Member:
     placement : ndarray of int, optional
         Where the drawn states sit in the model's ``dim``-long state vector (the
         rest stays 0); None: every entry is drawn.
+    x0_factor : ndarray (n, r), optional
+        F of the initial-state covariance Σ₀ = F F' (:attr:`codesign.Instance.x0_factor`):
+        the draws are x(0) = F z, z ~ N(0, I_r). None: x(0) ~ N(0, I).
     """
 
     problem: Any
@@ -143,6 +146,7 @@ class Member:
     lr: float
     decay: float = 1.0
     placement: np.ndarray | None = None
+    x0_factor: np.ndarray | None = None
 
     def shape_key(self) -> tuple:
         """What must agree between the members of one stack besides the loop: the curve's shape."""
@@ -301,7 +305,7 @@ def train_stack(model_type, members: list[Member], loop: Loop, **options) -> lis
 
     ``model_type(members, loop, **options)`` builds the :class:`StackModel`. Each
     model: Adam with its own learning rate on ``loop.schedule``, a fresh batch of
-    ``loop.batch`` draws x(0) ~ N(0, I) per update from its own ``data_seed``,
+    ``loop.batch`` draws x(0) ~ N(0, Σ₀) per update from its own ``data_seed``,
     gradient-norm clipping at ``loop.clip``. A model whose loss or gradient stops
     being finite is frozen (its parameters zeroed, its learning rate 0) and
     reported diverged; the others go on. The validation curve (mean normalized
@@ -337,7 +341,11 @@ def train_stack(model_type, members: list[Member], loop: Loop, **options) -> lis
         if loop.curve_every and k % loop.curve_every == 0:
             record(k)
         for m, (rng, where) in enumerate(zip(rngs, placements)):
-            draws[m][:, where] = rng.standard_normal((loop.batch, len(where)))
+            factor = members[m].x0_factor
+            if factor is None:
+                draws[m][:, where] = rng.standard_normal((loop.batch, len(where)))
+            else:
+                draws[m][:, where] = rng.standard_normal((loop.batch, factor.shape[1])) @ factor.T
         x0 = torch.tensor(draws, dtype=tdt)
         x0.mul_(alive.view(M, 1, 1).to(tdt))
         loss, grads = model.loss_and_grad(x0)
@@ -448,7 +456,7 @@ def selection_set(instance, size: int) -> np.ndarray:
     Drawn apart from the validation set so that picking the best ensemble member
     does not bias the reported cost; every learned method draws the same set.
     """
-    return np.random.default_rng([instance.seed, _SELECT]).standard_normal((size, instance.n))
+    return instance.initial_states(np.random.default_rng([instance.seed, _SELECT]), size)
 
 
 def best_member(results: list[TrainResult]) -> int | None:

@@ -10,7 +10,9 @@ Each file holds arrays ``A`` (n × n) and ``B`` (n × m) and optionally ``Q``,
 ``R`` (identity by default), ``state_nodes`` and ``input_nodes`` (the node of
 each state and input; one per node by default), ``comm_adj`` (the given
 communication graph between nodes, nonzero = node i receives from node j; the
-plant graph by default) and ``horizon`` (a scalar, 50 by default).
+plant graph by default), ``horizon`` (a scalar, 50 by default) and ``x0_cov``
+(n × n, the covariance of the initial state, identity by default; ``B1 @ B1.T``
+poses an H2 problem whose disturbances enter through ``B1``).
 
 An instance's identity in the store is the SHA-256 of its file's contents, not
 its path: editing a file gives new runs, moving or renaming it does not. A file
@@ -33,7 +35,7 @@ from . import Family, register_family
 
 KEYS = {"family", "files"}
 REQUIRED = ("A", "B")
-OPTIONAL = ("Q", "R", "comm_adj", "horizon", "state_nodes", "input_nodes")
+OPTIONAL = ("Q", "R", "comm_adj", "horizon", "state_nodes", "input_nodes", "x0_cov")
 
 
 def _paths(value, base) -> list[Path]:
@@ -80,7 +82,8 @@ def _instance(arrays: dict, name: str):
         horizon = int(h)
     return Instance.from_matrices(arrays["A"], arrays["B"], Q=arrays.get("Q"), R=arrays.get("R"),
                                   comm_adj=arrays.get("comm_adj"), horizon=horizon, name=name,
-                                  state_nodes=arrays.get("state_nodes"), input_nodes=arrays.get("input_nodes"))
+                                  state_nodes=arrays.get("state_nodes"), input_nodes=arrays.get("input_nodes"),
+                                  x0_cov=arrays.get("x0_cov"))
 
 
 def parse(table: dict, base=None) -> tuple:
@@ -118,7 +121,7 @@ def identity(spec: dict) -> dict:
 
 MATRICES = register_family(Family(
     name="matrices",
-    summary="your own systems from .npz files (A, B; optional Q, R, comm_adj, horizon), one instance per file",
+    summary="your own systems from .npz files (A, B; optional Q, R, comm_adj, horizon, x0_cov), one instance per file",
     parse=parse,
     build=build,
     fields=frozenset({"name", "n"}),

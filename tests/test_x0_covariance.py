@@ -204,3 +204,20 @@ def test_a_matrices_file_carries_the_covariance(tmp_path):
     from compare.run.parsing import SpecError
     with pytest.raises(SpecError, match="x0_cov must be positive semidefinite"):
         matrices.parse({"family": "matrices", "files": ["bad.npz"]}, base=tmp_path)
+
+
+def test_the_newton_path_reaches_its_diagonal_end_on_a_fine_dt_plant_under_lqrsps_weighting():
+    # lqrsp's model at dt = 0.01 under B1 B1' stalled at 23 links with no diagonal end (issue #60); the
+    # stand-in (a -5e-6 /s rotational mode, ZOH at dt = 0.01) with disturbances where the inputs enter.
+    from baselines import sparse_newton
+    from test_stabilizing_search import slow_mode_system
+
+    plant = slow_mode_system(0.01)
+    inst = Instance.from_matrices(plant.A, plant.B, x0_cov=plant.B @ plant.B.T, horizon=plant.horizon,
+                                  state_nodes=plant.state_nodes, input_nodes=plant.input_nodes)
+    path = sparse_newton(inst, gammas=[1e-3, 1e-1])
+    usable = [d for d in path if np.isfinite(d.cost)]
+    assert [d.links for d in usable][-1] == 0 and usable[0].links > 0
+    for d in usable:
+        assert np.max(np.abs(np.linalg.eigvals(inst.A + inst.B @ d.controller.K))) < 1
+        assert d.cost == pytest.approx(static_gain_cost(inst, d.controller.K), rel=1e-10)

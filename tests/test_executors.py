@@ -210,3 +210,26 @@ def test_learned_batch_spreads_its_models_and_scoring_over_the_dask_cluster(tmp_
     local, remote = _dump(tmp_path / "local.sqlite"), _dump(tmp_path / "dask.sqlite")
     assert len(local) == 2 and local == remote and all(row[-1] == "optimal" for row in local)
     assert seen.get("_timed_stack") == 4 and seen.get("_call") == 2, seen
+
+
+def test_a_dying_plug_in_fails_its_run_at_once_on_the_local_dask_cluster(tmp_path):
+    """A plug-in calling os._exit under `--executor dask-local`: its run is `failed` saying its worker died,
+    the other runs are stored, and nothing reaches stderr (the scheduler's log of the death stays off it)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    pytest.importorskip("distributed")
+    plugin = Path(__file__).resolve().parent / "fault_methods.py"
+    spec = tmp_path / "s.toml"
+    spec.write_text(f'name = "daskfault"\nplugins = ["{plugin}"]\n[instances]\nn = [8]\na_norms = [1.05]\nseeds = 1\n'
+                    '\n[[methods]]\nmethod = "lqr"\n\n[[methods]]\nmethod = "fault_os_exit"\n')
+    done = subprocess.run([sys.executable, "-m", "compare.cli", "run", str(spec), "--out", str(tmp_path / "out"),
+                           "--executor", "dask-local", "--workers", "2", "--no-progress"],
+                          capture_output=True, text=True, timeout=240)
+    assert done.returncode == 0 and done.stderr == "", done.stderr
+    with Store(tmp_path / "out" / "results.sqlite") as store:
+        records = {r.method: r for r in store.records()}
+    assert records["lqr"].status == "optimal"
+    dead = records["fault_os_exit"]
+    assert dead.status == "failed" and "its dask worker died" in dead.message

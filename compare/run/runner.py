@@ -120,8 +120,17 @@ def open_executor(address: str, workers: int):
             raise ExecutorError("dask.distributed is not installed: pip install 'dask[distributed]'") from None
         cluster = None
         if address == "dask-local":
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=40)
+            import logging
+
+            import dask
+
+            # A worker that dies fails its task at once, as in the local pool: dask's default retries it
+            # on three more workers (each restarted by its nanny), and under load such a round of
+            # restarts hung 2 of 8 tries of a plug-in calling os._exit. The scheduler runs in this
+            # process, so its log of that failure would reach the terminal of a successful run.
+            with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=logging.CRITICAL)
             client = Client(cluster)
         else:
             target = "tcp://" + address.split("://", 1)[1]
@@ -199,6 +208,9 @@ def _drain(pool: Executor, tasks: list[list[Run]], plugins, record) -> None:
                     raise
                 except Exception as exc:  # noqa: BLE001 - the executor's failure is these runs' status
                     message = f"the executor could not run it: {type(exc).__name__}: {exc}"
+                    if type(exc).__name__ == "KilledWorker":  # dask's: the process running it exited or was killed
+                        message = (f"its dask worker died while running it (the process exited or was killed; "
+                                   f"KilledWorker: {exc})")
                     results = [RunResult(failed_run(run, message), 0.0) for run in task]
                 for run, result in zip(task, results):
                     record(run, *result)

@@ -23,6 +23,10 @@ With ``locality`` at least the graph's diameter the constraints are those of
 tolerance). The design is scored on its designed maps, after checking that they
 satisfy the dynamics to rounding: the SLS realization then reproduces them exactly
 (tests compare with the realized closed loop at small N).
+
+An initial-state covariance Σ₀ (``Instance.x0_cov``) weighs the columns by Σ₀'s
+diagonal when it is diagonal (each column's minimizer unchanged); a non-diagonal Σ₀
+couples the columns and is refused (:func:`baselines.sls` solves that problem).
 """
 
 from __future__ import annotations
@@ -233,6 +237,12 @@ def sls_local(
     """
     if isinstance(locality, bool) or not isinstance(locality, (int, np.integer)) or locality < 0:
         raise ValueError(f"locality must be a non-negative integer, got {locality!r}")
+    cov = instance.x0_cov
+    if cov is not None and np.count_nonzero(cov - np.diag(np.diag(cov))):
+        # tr(Φ Σ₀ Φ'Q) couples the columns unless Σ₀ is diagonal; with a diagonal Σ₀ each column's
+        # problem is only scaled, so its minimizer is the one solved here.
+        raise ValueError("sls_local solves the columns of the response maps one by one, which is the problem "
+                         "only for a diagonal x0_cov; this instance's couples states: use sls")
     speed, T = checked_length(instance, speed, act_delay, horizon, fir)
     params = {"locality": int(locality), "graph": graph, "speed": speed, "act_delay": int(act_delay),
               "horizon": None if fir is not None else T, "fir": None if fir is None else int(fir)}

@@ -221,3 +221,17 @@ def test_the_newton_path_reaches_its_diagonal_end_on_a_fine_dt_plant_under_lqrsp
     for d in usable:
         assert np.max(np.abs(np.linalg.eigvals(inst.A + inst.B @ d.controller.K))) < 1
         assert d.cost == pytest.approx(static_gain_cost(inst, d.controller.K), rel=1e-10)
+
+
+def test_localized_sls_reads_a_diagonal_covariance_and_refuses_a_coupling_one():
+    from baselines import sls, sls_local
+
+    inst, _ = _h2_instance()
+    with pytest.raises(ValueError, match="diagonal x0_cov") as info:
+        sls_local(inst, locality=10)
+    assert "\n" not in str(info.value)
+    weights = np.diag(np.linspace(0.5, 2.0, inst.n))
+    diagonal = Instance.from_matrices(inst.A, inst.B, comm_adj=inst.comm_adj, horizon=20, x0_cov=weights)
+    # Beyond the graph's diameter the localized columns are sls's problem: the same design under Σ₀.
+    local, full = sls_local(diagonal, locality=10, graph="complete"), sls(diagonal, graph="complete")
+    assert local.cost == pytest.approx(full.cost, rel=1e-6)

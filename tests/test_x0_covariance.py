@@ -235,3 +235,18 @@ def test_localized_sls_reads_a_diagonal_covariance_and_refuses_a_coupling_one():
     # Beyond the graph's diameter the localized columns are sls's problem: the same design under Σ₀.
     local, full = sls_local(diagonal, locality=10, graph="complete"), sls(diagonal, graph="complete")
     assert local.cost == pytest.approx(full.cost, rel=1e-6)
+
+
+def test_the_tilted_proposal_tilts_z_and_its_weights_are_likelihood_ratios():
+    from codesign.estimators import TiltedProposal
+
+    inst, B1 = _h2_instance()
+    proposal = TiltedProposal.along(np.eye(inst.n) + 0.5, factor=inst.x0_factor)
+    x = proposal.draw(inst, 200_000, (7,))
+    assert np.abs(x - x @ B1 @ np.linalg.pinv(B1)).max() < 1e-9  # in the range of x0_cov
+    w = proposal.weights(x)
+    assert w.max() <= 1 / proposal.share + 1e-12
+    # E_q[w] = 1 and E_q[w x'Px] = E_p[x'Px] = trace(P Σ₀), to sampling error.
+    assert abs(w.mean() - 1) < 5 * w.std() / np.sqrt(w.size)
+    q = w * np.einsum("bi,ij,bj->b", x, inst.P, x)
+    assert abs(q.mean() - inst.trace_P) < 5 * q.std() / np.sqrt(q.size)

@@ -434,3 +434,40 @@ def test_forest_pair_names_end_before_the_budget_labels(comparisons):
     assert any("/node" in t.get_text() for t in axes[0].get_yticklabels())
     assert max(box.x1 for box in names) < min(box.x0 for box in budgets)
     plt.close(fig)
+
+
+def test_a_findings_row_pools_no_median_over_panels_that_are_different_systems():
+    """A chain, a platoon and a ring are different systems: a pair compared on all three gets a row for each, whose
+    cells are each panel's own, never one median over all their instances (#61); panels of the paper's family at
+    two ‖A‖₂ are one kind of system and still pool."""
+    gaps = {"chain": (0.020, 0.021, 0.022), "platoon": (0.050, 0.052, 0.054), "ring": (0.110, 0.111, 0.112, 0.113)}
+    rows = []
+    for family, values in gaps.items():
+        for s, gap in enumerate(values):
+            inst = {"family": family, "n": 20, "seed": s}
+            rows += [_rec(inst, "grnn_sparse", TANH, 10, 1.1 + gap), _rec(inst, "sparse_delayed", SD, 10, 1.1)]
+    records = Records.from_rows(rows)
+    comparisons = select_comparisons(records, budgets=(None,))
+    assert len(comparisons) == 3
+    lines = findings_markdown(comparisons, records=records)
+    i = lines.index("| first − second | any |")
+    table = [line for line in lines[i + 2:i + 10] if line.startswith("|")]
+    labels = [line.split("|")[1].strip() for line in table]
+    assert labels == [f"{TANH} − {SD}<br>on {f}" for f in gaps]
+    # each row is its system's median over its own instances (3/3, 3/3, 4/4): none over all 10 of them (+0.052)
+    cells = [line.split("|")[2].strip() for line in table]
+    assert cells == [f"+0.021<br>3/3{NB}?", f"+0.052<br>3/3{NB}?", f"+0.11<br>4/4{NB}?"]
+    assert not any("10/10" in line for line in lines)
+    legend = next(line for line in lines if line.startswith("Each cell:"))
+    assert "pools every panel" not in legend and "different systems" in legend
+    # the paper's family at two ‖A‖₂ is one kind of system: one row, pooled over both panels
+    paper = []
+    for a_norm in (0.995, 1.05):
+        for s in range(3):
+            paper += [_rec(_inst(s, a_norm=a_norm), "grnn_sparse", TANH, 10, 1.2),
+                      _rec(_inst(s, a_norm=a_norm), "sparse_delayed", SD, 10, 1.1)]
+    records = Records.from_rows(paper)
+    lines = findings_markdown(select_comparisons(records, budgets=(None,)), records=records)
+    (row,) = _table(lines).values()
+    assert row["any"].endswith(f"6/6{NB}▲")
+    assert any("A row pools every panel where the pair is compared" in line for line in lines)

@@ -36,7 +36,7 @@ it is one a table of the page gives. The sentences are chosen by rules, in this 
     where it holds, its largest difference first and its smallest, and the budgets where
     the verdict differs. Then either how it holds panel by panel (where a panel's test can
     pass Holm's correction), or the other pairs against the same design that go the same way.
-    Where the panels are different systems (they differ in family or case: a chain beside a
+    Where the panels are different systems (they differ in family, case or damping: a chain beside a
     platoon, :func:`different_systems`), only the pairs compared on panels of one kind are pooled.
 (c') **System by system.** Where the panels are different systems, a pair compared on several
     kinds, and every pair where (c) pooled none: never a median over them, but at the budget of
@@ -92,8 +92,9 @@ _NOTHING = "autonomous"
 _VERBS = {DIVERGED: ("diverges", "diverge"), FAILED: ("fails", "fail")}
 #: Spec keys that tell no two systems apart (:mod:`compare.report.ladder`'s rule).
 _NOT_SYSTEM = ("seed", "sha256")
-#: Spec keys whose text values name a kind of system: panels that differ in them are different systems.
-_KIND_KEYS = ("family", "case", "name")
+#: Spec keys whose text values name a kind of system: panels that differ in them are different systems
+#: (a grid at two dampings is two systems, as its panels are).
+_KIND_KEYS = ("family", "case", "name", "damping")
 
 
 # --------------------------------------------------------------------------- wording
@@ -471,12 +472,18 @@ def _kind(rs: Records) -> tuple:
     return tuple(sorted({(k, str(i.spec[k])) for i in rs.instances for k in _KIND_KEYS if k in i.spec}))
 
 
+def system_kinds(records, panels: Sequence[tuple]) -> dict[tuple, tuple]:
+    """Panel -> the kind of system its instances are (their family and case), for the ``panels`` the records hold:
+    panels of one kind may be pooled, panels of different kinds are different systems (:func:`different_systems`)."""
+    by_panel = as_records(records).by_panel
+    return {p: _kind(by_panel[p]) for p in panels if p in by_panel}
+
+
 def different_systems(records, panels: Sequence[tuple]) -> bool:
-    """Whether ``panels`` are different systems, so that no median may pool them: they differ in family or case
+    """Whether ``panels`` are different systems, so that no median may pool them: they differ in family, case or damping
     (a chain beside a platoon, ieee39 beside wecc). The panels of one random family at several sizes or ‖A‖₂
     are draws of one kind of system, which the Findings pool (docs/reports.md, "Pooling")."""
-    by_panel = as_records(records).by_panel
-    return len({_kind(by_panel[p]) for p in panels if p in by_panel}) > 1
+    return len(set(system_kinds(records, panels).values())) > 1
 
 
 def _one_kind(records, panels: Sequence[tuple]) -> bool:

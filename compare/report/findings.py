@@ -659,19 +659,26 @@ def _pool(cells: Sequence[Comparison], tier) -> Pooled:
     return Pooled(tuple(cells), paired, p, p, tier)
 
 
-def pooled_rows(comparisons: Sequence[Comparison]) -> list[Pooled]:
+def pooled_rows(comparisons: Sequence[Comparison], kinds: Mapping | None = None) -> list[Pooled]:
     """One :class:`Pooled` per pair and budget tier, over the panels where the pair is compared within it.
 
-    In the order of ``comparisons`` (pairs as the findings list them, then tiers in
-    increasing order, any number of links last); Holm-adjusted over all of them.
+    With ``kinds`` (panel -> its kind of system, :func:`compare.report.answer.system_kinds`), one per pair, kind
+    of system and budget tier instead: no row pools panels that are different systems (docs/reports.md,
+    "Pooling"); a panel ``kinds`` does not name is a kind of its own.
+
+    In the order of ``comparisons`` (pairs as the findings list them, then kinds in the order their panels first
+    come, then tiers in increasing order, any number of links last); Holm-adjusted over all of them.
     """
     per_node = budgets_per_node(comparisons)
-    groups: dict[tuple, list] = {}
+    groups: dict[tuple, dict] = {}
     for c in comparisons:
-        groups.setdefault((c.group, c.a, c.b), {}).setdefault(c.budget_tier(per_node), []).append(c)
+        kind = (kinds.get(c.panel, ("panel", c.panel))) if kinds is not None else None
+        (groups.setdefault((c.group, c.a, c.b), {}).setdefault(kind, {})
+         .setdefault(c.budget_tier(per_node), []).append(c))
     rows = []
-    for tiers in groups.values():
-        for tier in sorted(tiers, key=lambda t: math.inf if t is None else t):
-            rows.append(_pool(tiers[tier], tier))
+    for by_kind in groups.values():
+        for tiers in by_kind.values():
+            for tier in sorted(tiers, key=lambda t: math.inf if t is None else t):
+                rows.append(_pool(tiers[tier], tier))
     adjusted = holm([r.p_value for r in rows])
     return [replace(r, p_holm=q) for r, q in zip(rows, adjusted)]

@@ -9,8 +9,9 @@ p < 0.05, the difference is beyond the practical margin and the budget fronts as
 agree), △ / ▽ the same direction without passing Holm's correction, ○ the interval holds
 0, = equal within 0.1 % of LQR's cost (never "beats"), ± mixed (the typical instance
 favours one design, the median costs the other), ? too few instances for an interval
-(counts only). The first table pools every panel (:func:`compare.report.findings.pooled_rows`);
-the second gives each panel's cell, the forest plot's rows. Bullets say only what a table
+(counts only). The first table pools the panels where a pair is compared
+(:func:`compare.report.findings.pooled_rows`), only panels of one kind of system: a pair compared on different
+systems (another family, case or damping) has a row for each; the second gives each panel's cell, the forest plot's rows. Bullets say only what a table
 cannot: mixed cells with both numbers, and what a pair's gap means where the pair alone
 does not say it. What no single cell can reach is said once, before the table.
 """
@@ -431,8 +432,9 @@ def _power_note(comparisons: Sequence[Comparison], rows: Sequence[Pooled]) -> st
     return text
 
 
-def _legend(pooled: bool) -> str:
-    """What a cell says and what each mark means, once."""
+def _legend(pooled: bool, split: bool = False, one_panel: bool = False) -> str:
+    """What a cell says and what each mark means, once; with ``split``, that no row pools different systems (with
+    ``one_panel``, where every row is one panel, that no row pools at all)."""
     text = ("Each cell: the median over instances of the first design's best cost within the budget minus the "
             "second's (× LQR's cost; negative: the first costs less), its 95 % interval, and k/n: the instances, of "
             f"n, on the median's side. {MARKS[(_BEATS, 1)]} / {MARKS[(_BEATS, -1)]}: the first costs more / less, "
@@ -440,7 +442,14 @@ def _legend(pooled: bool) -> str:
             f"{MARKS[(_DIRECTION, -1)]}: the interval excludes 0 without passing it; {MARKS[_UNCLEAR]}: the "
             f"interval holds 0; {MARKS[_EQUAL]}: {EQUAL_WORDS}; {MARKS[_MIXED]}: mixed; {MARKS[_FEW]}: too few "
             "instances for an interval.")
-    if pooled:
+    if pooled and split and one_panel:
+        text += (" The panels are different systems (another family, case or damping), so no row pools them: a pair "
+                 "compared on several has a row for each, as the detail below does.")
+    elif pooled and split:
+        text += (" A row pools the panels where the pair is compared that are one kind of system (one family, "
+                 "case and damping, at any N or ‖A‖₂); a pair compared on different systems has a row for each, and no median "
+                 "spans them. The detail below gives each panel.")
+    elif pooled:
         text += " A row pools every panel where the pair is compared; the detail below gives each panel."
     return text
 
@@ -524,29 +533,44 @@ def _header(first: str, tiers: Sequence, per_node: bool) -> list[str]:
             "|---|" + "---|" * len(tiers)]
 
 
-def _row_label(name: str, cells: Sequence[Comparison], names: Mapping) -> str:
+def _row_label(name: str, cells: Sequence[Comparison], names: Mapping, split: bool = False) -> str:
     """The pair, then what a reader needs beside it: the information models where they differ, the panels where
-    the pair is compared on only some."""
+    the pair is compared on only some (with ``split``, where panels are different systems, the family of several
+    panels of one: "on chain, N = 20 and 100", "on chain (3 of 7 panels)")."""
     c0 = cells[0]
     extra = []
     if c0.relation != "same":
         extra.append(models_text(c0).strip("()"))
     panels = list(dict.fromkeys(c.panel for c in cells))
     if len(names) > 1 and len(panels) < len(names):
-        extra.append(f"on {_panel_list(panels, names)}" if len(panels) <= 2 else f"{len(panels)} of {len(names)} panels")
+        family = panels[0][0] if split and len({p[0] for p in panels}) == 1 else None
+        if family is not None and len(panels) > 1 and all(names[p] == f"{family}, N = {p[1]}" for p in panels):
+            extra.append(f"on {family}, N = {join_words([str(p[1]) for p in panels])}")  # "on chain, N = 20 and 100"
+        elif len(panels) <= 2:
+            extra.append(f"on {_panel_list(panels, names)}")
+        elif family is not None:
+            extra.append(f"on {family} ({len(panels)} of {len(names)} panels)")
+        else:
+            extra.append(f"{len(panels)} of {len(names)} panels")
     return name + "".join(f"<br>{x}" for x in extra)
 
 
 def _main_table(pairs: Mapping, rows: Sequence[Pooled], tiers: Sequence, per_node: bool, names: Mapping,
-                short: Mapping) -> list[str]:
-    by_pair: dict[tuple, dict] = {}
+                short: Mapping, kinds: Mapping | None = None) -> list[str]:
+    """One row per pair; where ``kinds`` (panel -> kind of system) tell the pair's panels apart, one per pair and
+    kind of system, as :func:`compare.report.findings.pooled_rows` pools them."""
+    kind = (lambda p: kinds.get(p, ("panel", p))) if kinds is not None else (lambda p: None)  # noqa: E731
+    split = len({kind(p) for p in names}) > 1
+    by_row: dict[tuple, dict] = {}
     for r in rows:
-        by_pair.setdefault((r.group, r.a, r.b), {})[r.tier] = r
+        by_row.setdefault((r.group, r.a, r.b, kind(r.cells[0].panel)), {})[r.tier] = r
     lines = _header("first − second", tiers, per_node)
     for key, cells in pairs.items():
         name = pair_name(key[1], key[2], short)
-        lines.append(f"| {_row_label(name, cells, names)} | "
-                     + " | ".join(_cell(by_pair[key].get(t)) for t in tiers) + " |")
+        for k in dict.fromkeys(kind(c.panel) for c in cells):
+            shown = [c for c in cells if kind(c.panel) == k]
+            lines.append(f"| {_row_label(name, shown, names, split)} | "
+                         + " | ".join(_cell(by_row[(*key, k)].get(t)) for t in tiers) + " |")
     return lines
 
 
@@ -674,16 +698,23 @@ def findings_markdown(comparisons: Sequence[Comparison], *, excluded_total: int 
     pairs: dict[tuple, list] = {}
     for c in comparisons:
         pairs.setdefault((c.group, c.a, c.b), []).append(c)
-    rows = pooled_rows(comparisons)
+    if records is not None:  # panels of one kind of system pool; different systems (family, case or damping) never do
+        from .answer import system_kinds
+
+        kinds = system_kinds(records, list(names))
+    else:  # without records, a panel's family name (a published system's name) is its kind
+        kinds = {p: (p[0],) for p in names}
+    rows = pooled_rows(comparisons, kinds)
     several = len(names) > 1
+    split = len({kinds.get(p, ("panel", p)) for p in names}) > 1
     if records is not None:
         complete, repaired = complete_plant_panels(records), repaired_instances(records, comparisons)
     else:
         complete, repaired = _identical_panels(comparisons), None
     power = _power_note(comparisons, rows)
     lines = ["## Findings", ""] + ([power, ""] if power else [])
-    lines += [OPEN_TABLE, ""] + _main_table(pairs, rows, tiers, per_node, names, short) + [""]
-    lines += [_legend(several), ""]
+    lines += [OPEN_TABLE, ""] + _main_table(pairs, rows, tiers, per_node, names, short, kinds) + [""]
+    lines += [_legend(several, split, all(len(r.cells) == 1 for r in rows)), ""]
     glossary = _glossary({x for c in comparisons for x in (c.a, c.b)})
     lines += [glossary, ""] if glossary else []
     if several:

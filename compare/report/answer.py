@@ -72,6 +72,7 @@ import numpy as np
 from codesign.status import DIVERGED, FAILED
 
 from ..run.records import Records, as_records, canonical_key
+from .system_kinds import different_systems, system_kinds  # noqa: F401  (system_kinds: the Findings' rule too)
 from .decomposition import decomposition_sentences
 from .findings import BOUND_LABEL, PRACTICAL_MARGIN, Comparison, Pooled, budgets_per_node, pooled_rows
 from .ladder import ladder_lines
@@ -92,9 +93,6 @@ _NOTHING = "autonomous"
 _VERBS = {DIVERGED: ("diverges", "diverge"), FAILED: ("fails", "fail")}
 #: Spec keys that tell no two systems apart (:mod:`compare.report.ladder`'s rule).
 _NOT_SYSTEM = ("seed", "sha256")
-#: Spec keys whose text values name a kind of system: panels that differ in them are different systems
-#: (a grid at two dampings is two systems, as its panels are).
-_KIND_KEYS = ("family", "case", "name", "damping")
 
 
 # --------------------------------------------------------------------------- wording
@@ -465,25 +463,6 @@ def also_sentence(rows_all: Sequence[Pooled], chosen: Sequence[Pooled], level: s
 
 
 # --------------------------------------------------------------------------- (c') the result, system by system
-
-
-def _kind(rs: Records) -> tuple:
-    """What kind of system a panel's instances are: the text values of their family and case (ladder's names)."""
-    return tuple(sorted({(k, str(i.spec[k])) for i in rs.instances for k in _KIND_KEYS if k in i.spec}))
-
-
-def system_kinds(records, panels: Sequence[tuple]) -> dict[tuple, tuple]:
-    """Panel -> the kind of system its instances are (their family and case), for the ``panels`` the records hold:
-    panels of one kind may be pooled, panels of different kinds are different systems (:func:`different_systems`)."""
-    by_panel = as_records(records).by_panel
-    return {p: _kind(by_panel[p]) for p in panels if p in by_panel}
-
-
-def different_systems(records, panels: Sequence[tuple]) -> bool:
-    """Whether ``panels`` are different systems, so that no median may pool them: they differ in family, case or damping
-    (a chain beside a platoon, ieee39 beside wecc). The panels of one random family at several sizes or ‖A‖₂
-    are draws of one kind of system, which the Findings pool (docs/reports.md, "Pooling")."""
-    return len(set(system_kinds(records, panels).values())) > 1
 
 
 def _one_kind(records, panels: Sequence[tuple]) -> bool:

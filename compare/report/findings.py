@@ -662,7 +662,7 @@ def _pool(cells: Sequence[Comparison], tier) -> Pooled:
 def pooled_rows(comparisons: Sequence[Comparison], kinds: Mapping | None = None) -> list[Pooled]:
     """One :class:`Pooled` per pair and budget tier, over the panels where the pair is compared within it.
 
-    With ``kinds`` (panel -> its kind of system, :func:`compare.report.answer.system_kinds`), one per pair, kind
+    With ``kinds`` (panel -> its kind of system, :func:`compare.report.system_kinds.system_kinds`), one per pair, kind
     of system and budget tier instead: no row pools panels that are different systems (docs/reports.md,
     "Pooling"); a panel ``kinds`` does not name is a kind of its own.
 

@@ -34,6 +34,7 @@ from .findings import (
     pooled_rows,
 )
 from .names import join_words, short_names
+from .system_kinds import system_kinds
 
 __all__ = ["findings_markdown", "complete_plant_panels", "repaired_instances", "EQUAL_WORDS", "number_text",
            "range_text", "side_of", "with_article", "short_label", "panel_names", "scope_text", "models_text",
@@ -699,7 +700,6 @@ def findings_markdown(comparisons: Sequence[Comparison], *, excluded_total: int 
     for c in comparisons:
         pairs.setdefault((c.group, c.a, c.b), []).append(c)
     if records is not None:  # panels of one kind of system pool; different systems (family, case or damping) never do
-        from .answer import system_kinds
 
         kinds = system_kinds(records, list(names))
     else:  # without records, a panel's family name (a published system's name) is its kind

@@ -74,8 +74,7 @@ def infinite_horizon_point(instance, K) -> GainPoint | None:
             return None  # too close to (or past) the stability boundary to sum
     BtP = B.T @ P
     grad = 2.0 * ((R + BtP @ B) @ K + BtP @ A) @ L
-    J = float(np.trace(P)) if instance.x0_cov is None else float(np.sum(P * instance.x0_cov))
-    return GainPoint(K, J, P, L, grad)
+    return GainPoint(K, instance.x0_mean(P), P, L, grad)
 
 
 def check_gammas(gammas) -> np.ndarray:

@@ -295,8 +295,7 @@ def _solve_qp(instance, dist, T, *, speed, act_delay, fir):
         return None, None, info
     value = np.zeros(keep.size)
     value[keep] = z.value
-    start = np.trace(instance.Q) if instance.x0_cov is None else np.sum(instance.Q * instance.x0_cov)
-    info["objective"] = float(problem.value) + float(start) / scale
+    info["objective"] = float(problem.value) + instance.x0_mean(instance.Q) / scale
     info["residual"] = float(np.max(np.abs(G @ z.value - b))) if b.size else 0.0
     X = np.empty((T + 1, n, n))
     X[0] = np.eye(n)

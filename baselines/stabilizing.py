@@ -395,7 +395,7 @@ def lyapunov_cost_and_grad(instance, K, mask=None, *, discount: float = 1.0) -> 
         except (np.linalg.LinAlgError, ValueError):
             return np.inf, np.zeros_like(K)
     scale = instance.trace_P
-    cost = float((np.trace(P) if instance.x0_cov is None else np.sum(P * instance.x0_cov)) / scale)
+    cost = instance.x0_mean(P) / scale
     grad = 2.0 * (instance.R @ K + instance.B.T @ P @ F / discount) @ S / scale
     if not (np.isfinite(cost) and np.all(np.isfinite(grad))):
         return np.inf, np.zeros_like(K)

@@ -199,14 +199,9 @@ def control_variate_estimate(instance, x0, costs, form=None) -> tuple[float, flo
     return float(residuals.mean()), float(residuals.std(ddof=1) / np.sqrt(m)), estimator
 
 
-def _x0_mean(instance, M) -> float:
-    """E[x0'Mx0] = tr(M Σ₀)."""
-    return float(np.trace(M)) if instance.x0_cov is None else float(np.sum(M * instance.x0_cov))
-
-
 def _form_feature(instance, x0, M) -> np.ndarray:
     """``x0'Mx0 - tr(M Σ₀)`` per row, as a column (mean 0)."""
-    return (np.einsum("bi,bi->b", x0 @ M, x0) - _x0_mean(instance, M))[:, None]
+    return (np.einsum("bi,bi->b", x0 @ M, x0) - instance.x0_mean(M))[:, None]
 
 
 def projected_relative_stderr(instance, x0, costs, draws: int, form=None, weights=None, *,
@@ -299,6 +294,7 @@ class TiltedProposal:
     inflation: float = TILT_INFLATION
     share: float = DEFENSIVE_SHARE
     factor: np.ndarray | None = None
+    whitener: np.ndarray | None = None  # F's pseudo-inverse, z = W x0: every weights() call needs it
 
     @classmethod
     def along(cls, form, *, inflation: float = TILT_INFLATION, share: float = DEFENSIVE_SHARE,
@@ -308,7 +304,8 @@ class TiltedProposal:
         eigvals = np.clip(eigvals, 0.0, None)
         top = eigvals.max()
         t = (1 - 1 / inflation) / (2 * top) if top > 0 else 0.0
-        return cls(form, eigvals, eigvecs, float(t), float(inflation), float(share), factor)
+        whitener = None if factor is None else np.linalg.pinv(factor)
+        return cls(form, eigvals, eigvecs, float(t), float(inflation), float(share), factor, whitener)
 
     @property
     def scales(self) -> np.ndarray:
@@ -325,8 +322,8 @@ class TiltedProposal:
 
     def weights(self, x) -> np.ndarray:
         """Likelihood ratios p(x) / q(x) of N(0, Σ₀) to the proposal, at most 1 / share."""
-        if self.factor is not None:  # back to z: F has full column rank and x = F z
-            x = np.asarray(x, dtype=float) @ np.linalg.pinv(self.factor).T
+        if self.whitener is not None:  # back to z: F has full column rank and x = F z
+            x = np.asarray(x, dtype=float) @ self.whitener.T
         y = x @ self.eigvecs
         log_ratio = self.t * np.einsum("bi,i,bi->b", y, self.eigvals, y) - np.log(self.scales).sum()
         with np.errstate(over="ignore"):

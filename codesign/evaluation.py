@@ -129,10 +129,9 @@ _MASK_DENSE_FRACTION = 0.25
 
 def _x0_trace(instance, P, order=None) -> float:
     """E[x(0)' P x(0)] = trace(P Σ₀); ``order``: the states' order P is in (a :class:`_ClosedLoop`'s)."""
-    if instance.x0_cov is None:
-        return float(np.trace(P))
-    cov = instance.x0_cov if order is None else instance.x0_cov[np.ix_(order, order)]
-    return float(np.sum(P * cov))
+    if instance.x0_cov is None or order is None:
+        return instance.x0_mean(P)
+    return float(np.sum(P * instance.x0_cov[np.ix_(order, order)]))
 
 
 def _cost_to_go(instance, K):

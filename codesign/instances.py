@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["Instance", "InstanceError", "check_instance", "paper_instance", "hop_distances", "node_ranks",
-           "node_width", "knn_neighbours", "is_connected", "knn_graph"]
+           "node_width", "knn_neighbours", "is_connected", "knn_graph", "gaussian_states"]
 
 
 class InstanceError(ValueError):
@@ -290,9 +290,13 @@ class Instance:
     @property
     def trace_P(self) -> float:
         """Normalizer: centralized LQR's expected cost, trace(P Σ₀) with x(0) ~ N(0, Σ₀) (trace(P) by default)."""
+        return self.x0_mean(self.P)
+
+    def x0_mean(self, M) -> float:
+        """E[x(0)' M x(0)] = trace(M Σ₀) (trace(M) for Σ₀ = I)."""
         if self.x0_cov is None:
-            return float(np.trace(self.P))
-        return float(np.sum(self.P * self.x0_cov))
+            return float(np.trace(M))
+        return float(np.sum(M * self.x0_cov))
 
     @cached_property
     def x0_covariance(self) -> np.ndarray:
@@ -327,9 +331,7 @@ class Instance:
         With Σ₀ = I these are exactly ``rng.standard_normal((size, n))``, the
         draws every shipped report rests on.
         """
-        if self.x0_factor is None:
-            return rng.standard_normal((size, self.n))
-        return rng.standard_normal((size, self.x0_factor.shape[1])) @ self.x0_factor.T
+        return gaussian_states(rng, size, self.n, self.x0_factor)
 
     @cached_property
     def K_lqr(self) -> np.ndarray:
@@ -415,6 +417,14 @@ def _node_coupling(support: np.ndarray, row_nodes, col_nodes, nodes: int) -> np.
     """(N, N) 0/1 matrix: 1 where some row of node i and column of node j are coupled in ``support``."""
     coupled = _one_hot(row_nodes, nodes) @ support.astype(float) @ _one_hot(col_nodes, nodes).T
     return (coupled != 0).astype(float)
+
+
+def gaussian_states(rng, size: int, n: int, factor=None) -> np.ndarray:
+    """``size`` rows of n states ~ N(0, F F') from ``rng``: ``rng.standard_normal((size, n))`` when ``factor`` F
+    (n, r) is None, else ``z F'`` with z (size, r) standard normal."""
+    if factor is None:
+        return rng.standard_normal((size, n))
+    return rng.standard_normal((size, factor.shape[1])) @ factor.T
 
 
 def _covariance(value, n: int) -> np.ndarray:

@@ -36,6 +36,7 @@ from .._lazy import lazy_import
 from ..cluster import SPREAD_ABOVE, spread
 from ..design import Design
 from ..evaluation import simulate, simulate_to_precision, validation_set
+from ..instances import gaussian_states
 from ..status import DIVERGED, OPTIMAL
 
 torch = lazy_import("torch")
@@ -341,11 +342,7 @@ def train_stack(model_type, members: list[Member], loop: Loop, **options) -> lis
         if loop.curve_every and k % loop.curve_every == 0:
             record(k)
         for m, (rng, where) in enumerate(zip(rngs, placements)):
-            factor = members[m].x0_factor
-            if factor is None:
-                draws[m][:, where] = rng.standard_normal((loop.batch, len(where)))
-            else:
-                draws[m][:, where] = rng.standard_normal((loop.batch, factor.shape[1])) @ factor.T
+            draws[m][:, where] = gaussian_states(rng, loop.batch, len(where), members[m].x0_factor)
         x0 = torch.tensor(draws, dtype=tdt)
         x0.mul_(alive.view(M, 1, 1).to(tdt))
         loss, grads = model.loss_and_grad(x0)

@@ -64,6 +64,7 @@ from .statistics import (
     panel_nodes,
 )
 from .styles import GRNN_KINDS, Style, grnn_kinds, style_for
+from .system_kinds import kind_of
 
 __all__ = ["arm_labels", "UNCERTAIN_RSE", "BOUND_LABEL", "ALPHA", "PRACTICAL_MARGIN", "Comparison", "is_unresolved", "unresolved", "is_sls_bound",
            "select_comparisons", "holm", "sign_test", "budgets_per_node", "Pooled", "pooled_rows"]
@@ -672,7 +673,7 @@ def pooled_rows(comparisons: Sequence[Comparison], kinds: Mapping | None = None)
     per_node = budgets_per_node(comparisons)
     groups: dict[tuple, dict] = {}
     for c in comparisons:
-        kind = (kinds.get(c.panel, ("panel", c.panel))) if kinds is not None else None
+        kind = kind_of(kinds, c.panel)
         (groups.setdefault((c.group, c.a, c.b), {}).setdefault(kind, {})
          .setdefault(c.budget_tier(per_node), []).append(c))
     rows = []

@@ -34,7 +34,7 @@ from .findings import (
     pooled_rows,
 )
 from .names import join_words, short_names
-from .system_kinds import system_kinds
+from .system_kinds import kind_of, system_kinds
 
 __all__ = ["findings_markdown", "complete_plant_panels", "repaired_instances", "EQUAL_WORDS", "number_text",
            "range_text", "side_of", "with_article", "short_label", "panel_names", "scope_text", "models_text",
@@ -560,16 +560,15 @@ def _main_table(pairs: Mapping, rows: Sequence[Pooled], tiers: Sequence, per_nod
                 short: Mapping, kinds: Mapping | None = None) -> list[str]:
     """One row per pair; where ``kinds`` (panel -> kind of system) tell the pair's panels apart, one per pair and
     kind of system, as :func:`compare.report.findings.pooled_rows` pools them."""
-    kind = (lambda p: kinds.get(p, ("panel", p))) if kinds is not None else (lambda p: None)  # noqa: E731
-    split = len({kind(p) for p in names}) > 1
+    split = len({kind_of(kinds, p) for p in names}) > 1
     by_row: dict[tuple, dict] = {}
     for r in rows:
-        by_row.setdefault((r.group, r.a, r.b, kind(r.cells[0].panel)), {})[r.tier] = r
+        by_row.setdefault((r.group, r.a, r.b, kind_of(kinds, r.cells[0].panel)), {})[r.tier] = r
     lines = _header("first − second", tiers, per_node)
     for key, cells in pairs.items():
         name = pair_name(key[1], key[2], short)
-        for k in dict.fromkeys(kind(c.panel) for c in cells):
-            shown = [c for c in cells if kind(c.panel) == k]
+        for k in dict.fromkeys(kind_of(kinds, c.panel) for c in cells):
+            shown = [c for c in cells if kind_of(kinds, c.panel) == k]
             lines.append(f"| {_row_label(name, shown, names, split)} | "
                          + " | ".join(_cell(by_row[(*key, k)].get(t)) for t in tiers) + " |")
     return lines
@@ -700,13 +699,12 @@ def findings_markdown(comparisons: Sequence[Comparison], *, excluded_total: int 
     for c in comparisons:
         pairs.setdefault((c.group, c.a, c.b), []).append(c)
     if records is not None:  # panels of one kind of system pool; different systems (family, case or damping) never do
-
         kinds = system_kinds(records, list(names))
     else:  # without records, a panel's family name (a published system's name) is its kind
         kinds = {p: (p[0],) for p in names}
     rows = pooled_rows(comparisons, kinds)
     several = len(names) > 1
-    split = len({kinds.get(p, ("panel", p)) for p in names}) > 1
+    split = len({kind_of(kinds, p) for p in names}) > 1
     if records is not None:
         complete, repaired = complete_plant_panels(records), repaired_instances(records, comparisons)
     else:

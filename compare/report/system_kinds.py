@@ -35,3 +35,11 @@ def different_systems(records, panels: Sequence[tuple]) -> bool:
     (a chain beside a platoon, ieee39 beside wecc). The panels of one random family at several sizes or ‖A‖₂
     are draws of one kind of system, which the Findings pool (docs/reports.md, "Pooling")."""
     return len(set(system_kinds(records, panels).values())) > 1
+
+
+def kind_of(kinds, panel):
+    """The kind of system ``kinds`` (panel -> kind) gives ``panel``: a panel it does not name is a kind of its own;
+    None for every panel without ``kinds`` (one kind, pooled)."""
+    if kinds is None:
+        return None
+    return kinds.get(panel, ("panel", panel))
